@@ -1,0 +1,23 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Test-wide setup: every test run gets its own ROS domain and a HOME for rcl logging."""
+import os
+import random
+
+os.environ.setdefault('HOME', '/tmp')
+os.environ.setdefault('MPLBACKEND', 'Agg')
+if 'ROS_DOMAIN_ID' not in os.environ:
+    # 1..100 stays inside the default DDS port range; random so parallel runs do not meet
+    os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 100))
