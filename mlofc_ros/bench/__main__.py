@@ -1,0 +1,45 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Dispatch ``python -m mlofc_ros.bench NAME [options]`` to ``mlofc_ros.bench.NAME.main``."""
+import importlib
+import sys
+from typing import List, Optional
+
+BENCHMARKS = {
+    'paper': 'the paper experiments (Fig. 2-5): misclassification and motion error vs noise',
+    'frontend': 'line detection and tracking on rendered and real sequences',
+    'hopkins': 'real line tracks built from Hopkins155 point tracks',
+    'accuracy': 'robust solver vs floor, outliers, multi-frame, model selection, solver speed',
+    'pipeline': 'per-stage timings of the whole per-frame pipeline vs LSD alone',
+    'ros': 'highest image rate the running node keeps up with, and its latency',
+}
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ('-h', '--help'):
+        print('usage: python -m mlofc_ros.bench NAME [options]\n')
+        for name, text in BENCHMARKS.items():
+            print(f'  {name:10s} {text}')
+        return 0
+    name = argv.pop(0)
+    if name not in BENCHMARKS:
+        print(f'unknown benchmark {name!r}; choose from {sorted(BENCHMARKS)}', file=sys.stderr)
+        return 2
+    module = importlib.import_module(f'mlofc_ros.bench.{name}')
+    return int(module.main(argv) or 0)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
