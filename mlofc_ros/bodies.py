@@ -1,0 +1,202 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Stable body ids over time.
+
+The solver numbers its bodies arbitrarily in every window. :class:`BodyTracker` maps them onto
+stable ids: body ``i`` of this window gets the id of the previous body that shares most of its
+tracks (the tracker's track ids carry their previous label across windows) and, second, whose
+angular velocity is closest. The assignment is exact (maximum total score over all permutations;
+``n <= 8`` bodies). The first window numbers bodies by decreasing track count, so the static
+background (usually the largest body) is body 0, and body ``i`` keeps its id while it is seen.
+"""
+import functools
+import itertools
+from typing import Dict, Optional, Tuple
+
+import numpy as np
+
+#: Largest number of bodies solved by exhaustive search (8! = 40320 permutations).
+MAX_EXACT = 8
+
+
+@functools.lru_cache(maxsize=MAX_EXACT + 1)
+def _permutations(k: int) -> np.ndarray:
+    return np.array(list(itertools.permutations(range(k))), dtype=np.intp).reshape(-1, k)
+
+
+def assign(score: np.ndarray) -> np.ndarray:
+    """Maximum-score assignment of rows to columns (exact for ``max(shape) <= 8``).
+
+    Parameters
+    ----------
+    score : (R, C) float
+        Score of giving row ``r`` column ``c``; the matrix is padded with zeros to be square.
+
+    Returns
+    -------
+    (R,) intp
+        Column of every row, all distinct; columns ``>= C`` are new ones (when ``R > C``).
+        Ties go to the lexicographically smallest assignment (identity first).
+
+    Larger problems fall back to a greedy assignment.
+    """
+    score = np.asarray(score, dtype=float)
+    r, c = score.shape
+    k = max(r, c)
+    if k == 0:
+        return np.zeros(0, dtype=np.intp)
+    full = np.zeros((k, k))
+    full[:r, :c] = np.nan_to_num(score, nan=0.0, posinf=0.0, neginf=0.0)
+    if k <= MAX_EXACT:
+        perms = _permutations(k)
+        totals = full[np.arange(k), perms].sum(axis=1)
+        best = perms[int(np.argmax(totals))]
+        return best[:r].copy()
+    out = np.full(k, -1, dtype=np.intp)  # greedy: best pair first
+    work = full.copy()
+    for _ in range(k):
+        i, j = np.unravel_index(int(np.argmax(work)), work.shape)
+        out[i] = j
+        work[i, :] = -np.inf
+        work[:, j] = -np.inf
+    return out[:r]
+
+
+def relabel(labels: np.ndarray, mapping: np.ndarray) -> np.ndarray:
+    """Map solver labels (``-1`` unassigned) through ``mapping`` (solver body -> stable id)."""
+    labels = np.asarray(labels, dtype=np.int64)
+    mapping = np.asarray(mapping, dtype=np.int64)
+    out = np.full(labels.shape, -1, dtype=np.int64)
+    ok = (labels >= 0) & (labels < mapping.size)
+    out[ok] = mapping[labels[ok]]
+    return out
+
+
+class BodyTracker:
+    """Give the solver's bodies ids that stay the same from window to window.
+
+    Parameters
+    ----------
+    omega_weight : float
+        Weight of angular-velocity similarity (in [0, 1]) against the shared-track fraction
+        (in [0, 1]); shared tracks dominate, angular velocity decides when tracks were lost.
+    """
+
+    def __init__(self, omega_weight: float = 0.5) -> None:
+        self.omega_weight = float(omega_weight)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything: the next window is numbered afresh."""
+        self._track_ids = np.zeros(0, dtype=np.int64)   # sorted
+        self._track_labels = np.zeros(0, dtype=np.int64)
+        self._omegas: Dict[int, np.ndarray] = {}
+        self.n_slots = 0
+
+    def forget_tracks(self) -> None:
+        """Forget the track labels (the tracker restarted and may reuse ids); keep the omegas."""
+        self._track_ids = np.zeros(0, dtype=np.int64)
+        self._track_labels = np.zeros(0, dtype=np.int64)
+
+    @property
+    def track_labels(self) -> Dict[int, int]:
+        """Carried ``{track_id: stable body id}``."""
+        return dict(zip(self._track_ids.tolist(), self._track_labels.tolist()))
+
+    def previous_labels(self, track_ids: np.ndarray) -> np.ndarray:
+        """Stable body id each track had in earlier windows (``-1`` when unknown), (N,) int64."""
+        ids = np.asarray(track_ids, dtype=np.int64).ravel()
+        out = np.full(ids.shape, -1, dtype=np.int64)
+        if self._track_ids.size and ids.size:
+            pos = np.clip(np.searchsorted(self._track_ids, ids), 0, self._track_ids.size - 1)
+            hit = self._track_ids[pos] == ids
+            out[hit] = self._track_labels[pos[hit]]
+        return out
+
+    def update(self, track_ids: np.ndarray, labels: np.ndarray,
+               angular_velocities: np.ndarray,
+               valid: Optional[np.ndarray] = None) -> np.ndarray:
+        """Match this window's bodies to the stable ones and remember the result.
+
+        Parameters
+        ----------
+        track_ids : (N,) int
+            Track ids of the window's tracks.
+        labels : (N,) int
+            Solver body index of every track, ``-1`` unassigned.
+        angular_velocities : (n, 3) float
+            Angular velocity of every solver body (any consistent unit, e.g. rad/s).
+        valid : (n,) bool, optional
+            Bodies whose angular velocity is trustworthy (default: finite ones).
+
+        Returns
+        -------
+        (n,) int64
+            Stable id of every solver body (a permutation of ``0..n-1`` when the number of bodies
+            does not change).
+        """
+        ids = np.asarray(track_ids, dtype=np.int64).ravel()
+        lab = np.asarray(labels, dtype=np.int64).ravel()
+        w = np.asarray(angular_velocities, dtype=float).reshape(-1, 3)
+        n = w.shape[0]
+        if valid is None:
+            valid = np.all(np.isfinite(w), axis=1)
+        valid = np.asarray(valid, dtype=bool).ravel()
+        if ids.shape != lab.shape:
+            raise ValueError(f'track_ids {ids.shape} and labels {lab.shape} differ in shape')
+        if n == 0:
+            return np.zeros(0, dtype=np.int64)
+        lab = np.where(lab < n, lab, -1)
+        counts = np.bincount(lab[lab >= 0], minlength=n)[:n]
+        if self.n_slots == 0:
+            order = np.argsort(-counts, kind='stable')
+            mapping = np.empty(n, dtype=np.int64)
+            mapping[order] = np.arange(n)
+        else:
+            mapping = assign(self._score(ids, lab, w, valid, n)).astype(np.int64)
+        self._remember(ids, lab, w, valid, mapping)
+        return mapping
+
+    def _score(self, ids: np.ndarray, lab: np.ndarray, w: np.ndarray, valid: np.ndarray,
+               n: int) -> np.ndarray:
+        """(n, n_slots) score: shared-track fraction + omega_weight * omega similarity."""
+        slots = self.n_slots
+        prev = self.previous_labels(ids)
+        both = (lab >= 0) & (prev >= 0) & (prev < slots)
+        overlap = np.zeros((n, slots))
+        np.add.at(overlap, (lab[both], prev[both]), 1.0)
+        overlap /= np.maximum(overlap.sum(axis=1, keepdims=True), 1.0)
+        sim = np.zeros((n, slots))
+        for s, ws in self._omegas.items():   # <= 8 slots
+            d = np.linalg.norm(w - ws, axis=1)
+            scale = np.linalg.norm(w, axis=1) + np.linalg.norm(ws) + 1e-9
+            sim[:, s] = np.where(valid, np.clip(1.0 - d / scale, 0.0, 1.0), 0.0)
+        return overlap + self.omega_weight * sim
+
+    def _remember(self, ids: np.ndarray, lab: np.ndarray, w: np.ndarray, valid: np.ndarray,
+                  mapping: np.ndarray) -> None:
+        stable = relabel(lab, mapping)
+        prev = self.previous_labels(ids)
+        carried = np.where(stable >= 0, stable, prev)   # unassigned now: keep the old label
+        keep = carried >= 0
+        order = np.argsort(ids[keep], kind='stable')
+        self._track_ids = ids[keep][order]
+        self._track_labels = carried[keep][order]
+        for j in np.flatnonzero(valid):
+            self._omegas[int(mapping[j])] = w[j].copy()
+        self.n_slots = max(self.n_slots, int(mapping.max()) + 1)
+
+    def state(self) -> Tuple[int, Dict[int, np.ndarray]]:
+        """``(number of stable ids so far, {stable id: last angular velocity})``."""
+        return self.n_slots, {k: v.copy() for k, v in self._omegas.items()}

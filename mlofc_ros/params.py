@@ -1,0 +1,230 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""The one parameter table of mlofc_ros.
+
+The node declares these as ROS parameters (with descriptors and ranges built from this table),
+:class:`mlofc_ros.pipeline.Pipeline` takes them as keyword arguments, the bag tool exposes them as
+options and the README lists them (:func:`markdown_table`). Nothing here imports rclpy.
+
+Doubles accept integers (``-p focal_length:=500`` arrives as an integer; the node declares doubles
+with dynamic typing and this module coerces), but document them as ``500.0``.
+
+Example::
+
+    >>> from mlofc_ros import params
+    >>> params.validate('window', 1)
+    'window must be in [2, 30], got 1'
+    >>> params.coerce('focal_length', 500)
+    500.0
+"""
+from dataclasses import dataclass
+import math
+from typing import Any, Dict, Iterable, Mapping, Optional, Tuple, Union
+
+Number = Union[int, float]
+
+#: Fallback method list while ``mlofc_ros.solver`` does not export ``METHODS``.
+_FALLBACK_METHODS = ('robust',)
+
+
+def solver_methods() -> Tuple[str, ...]:
+    """Return the solver's method names (``mlofc_ros.solver.METHODS``)."""
+    try:
+        from mlofc_ros.solver import METHODS
+    except ImportError:  # the solver package is still being written
+        return _FALLBACK_METHODS
+    return tuple(METHODS)
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: its name, Python type, default, meaning and allowed values.
+
+    Attributes
+    ----------
+    name : str
+        Parameter name, the same for the ROS parameter, the Pipeline keyword and the bag option.
+    type : type
+        ``int``, ``float``, ``str`` or ``bool`` (``float`` parameters also accept ints).
+    default : int | float | str | bool
+        Default value.
+    description : str
+        One line with units, for ``ros2 param describe`` and the README.
+    range : (lo, hi) or None
+        Inclusive numeric range.
+    choices : tuple of str or None
+        Allowed strings (``method``: resolved from the solver at validation time).
+    read_only : bool
+        True when the value can only be set at start-up.
+    scope : str
+        ``'pipeline'`` (passed to :class:`~mlofc_ros.pipeline.Pipeline`) or ``'node'`` (the ROS
+        shell only: queues, debug output).
+    """
+
+    name: str
+    type: type  # noqa: A003 (the table's column name)
+    default: Any
+    description: str
+    range: Optional[Tuple[Number, Number]] = None  # noqa: A003 (the table's column name)
+    choices: Optional[Tuple[str, ...]] = None
+    read_only: bool = False
+    scope: str = 'pipeline'
+
+    def allowed_choices(self) -> Optional[Tuple[str, ...]]:
+        """Allowed strings, or None when any string is allowed."""
+        if self.name == 'method':
+            return solver_methods()
+        return self.choices
+
+
+#: The parameter table, in the order the README lists it.
+PARAMETERS: Tuple[ParamSpec, ...] = (
+    ParamSpec('num_bodies', int, 2,
+              'Number of independently moving rigid bodies, the static background counting as '
+              'one; 0 = choose automatically (if the solver supports it).',
+              range=(0, 8)),
+    ParamSpec('window', int, 5,
+              'Sliding window length in frames; the solver runs on the last `window` frames at '
+              'every frame.',
+              range=(2, 30)),
+    ParamSpec('method', str, 'robust',
+              'Solver method (one of mlofc_ros.solver.METHODS).'),
+    ParamSpec('min_segment_length', float, 20.0,
+              'Shortest line segment detected and tracked, in pixels.',
+              range=(2.0, 10000.0)),
+    ParamSpec('min_track_frames', int, 2,
+              'A track must be seen in at least this many frames of the window to be segmented '
+              '(capped at `window`).',
+              range=(2, 30)),
+    ParamSpec('focal_length', float, 0.0,
+              'Focal length in pixels. 0 = use camera_info (or estimate it when there is none); '
+              '> 0 = fx = fy = focal_length with the principal point at the image centre, '
+              'overriding camera_info (no undistortion).',
+              range=(0.0, 1.0e6)),
+    ParamSpec('max_frame_gap', float, 3.0,
+              'Restart the window when consecutive stamps are further apart than this many '
+              'nominal frame intervals (median of recent intervals); 0 = never.',
+              range=(0.0, 1000.0)),
+    ParamSpec('seed', int, 0,
+              'Random seed of the solver (results are reproducible for a given seed).',
+              range=(0, 2 ** 31 - 1)),
+    ParamSpec('max_pixels', int, 4096 * 4096,
+              'Reject images with more pixels than this (width * height).',
+              range=(1, 2 ** 31 - 1)),
+    ParamSpec('publish_debug_image', bool, False,
+              'Always publish ~/debug_image (it is also published whenever it has subscribers).',
+              scope='node'),
+    ParamSpec('queue_size', int, 2,
+              'Frames waiting for the worker; when full, the stalest frame is dropped.',
+              range=(1, 100), scope='node'),
+    ParamSpec('warn_period', float, 5.0,
+              'Minimum seconds between two warnings about the same kind of bad input.',
+              range=(0.0, 3600.0), scope='node'),
+)
+
+#: The table keyed by name.
+PARAMS: Dict[str, ParamSpec] = {p.name: p for p in PARAMETERS}
+
+
+def _type_name(t: type) -> str:
+    return {int: 'integer', float: 'double', str: 'string', bool: 'bool'}[t]
+
+
+def validate(name: str, value: Any) -> Optional[str]:
+    """Check one parameter value; return None when valid, else a reason a person can read.
+
+    Integers are accepted for doubles (and converted by :func:`coerce`); booleans are not
+    integers here. Unknown names are rejected.
+    """
+    spec = PARAMS.get(name)
+    if spec is None:
+        return f'unknown parameter {name!r}; known: {", ".join(PARAMS)}'
+    if value is None:
+        return f'{name} must be set to a {_type_name(spec.type)} value, got no value'
+    if spec.type is bool:
+        if not isinstance(value, bool):
+            return f'{name} must be a bool (true/false), got {type(value).__name__} {value!r}'
+        return None
+    if spec.type is str:
+        if not isinstance(value, str):
+            return f'{name} must be a string, got {type(value).__name__} {value!r}'
+        choices = spec.allowed_choices()
+        if choices is not None and value not in choices:
+            return f'{name} must be one of {", ".join(choices)}, got {value!r}'
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        hint = ' (write e.g. 1.0)' if spec.type is float else ''
+        return (f'{name} must be a{"n" if spec.type is int else ""} {_type_name(spec.type)}'
+                f'{hint}, got {type(value).__name__} {value!r}')
+    if spec.type is int and not isinstance(value, int):
+        return f'{name} must be an integer, got double {value!r}'
+    if not math.isfinite(float(value)):
+        return f'{name} must be finite, got {value!r}'
+    if spec.range is not None:
+        lo, hi = spec.range
+        if not lo <= value <= hi:
+            return f'{name} must be in [{lo}, {hi}], got {value!r}'
+    return None
+
+
+def coerce(name: str, value: Any) -> Any:
+    """Return ``value`` converted to the parameter's Python type; ``ValueError`` when invalid."""
+    reason = validate(name, value)
+    if reason is not None:
+        raise ValueError(reason)
+    return PARAMS[name].type(value)
+
+
+def defaults(scope: Optional[str] = None) -> Dict[str, Any]:
+    """Return ``{name: default}`` for all parameters, or only those of ``scope``."""
+    return {p.name: p.default for p in PARAMETERS if scope is None or p.scope == scope}
+
+
+def check_all(values: Mapping[str, Any]) -> Dict[str, Any]:
+    """Validate and coerce a mapping of parameters; ``ValueError`` listing every problem."""
+    problems = [r for r in (validate(k, v) for k, v in values.items()) if r is not None]
+    if problems:
+        raise ValueError('; '.join(problems))
+    return {k: PARAMS[k].type(v) for k, v in values.items()}
+
+
+def names(scope: Optional[str] = None) -> Iterable[str]:
+    """Parameter names (of ``scope`` when given) in table order."""
+    return [p.name for p in PARAMETERS if scope is None or p.scope == scope]
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, str):
+        return f"'{value}'"
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+def markdown_table() -> str:
+    """Return the parameter table as GitHub Markdown (for the README)."""
+    rows = ['| name | type | default | range | dynamic | description |',
+            '|---|---|---|---|---|---|']
+    for p in PARAMETERS:
+        if p.range is not None:
+            allowed = f'[{_fmt(p.range[0])}, {_fmt(p.range[1])}]'
+        elif p.allowed_choices() is not None:
+            allowed = ', '.join(p.allowed_choices())
+        else:
+            allowed = ''
+        rows.append(f'| `{p.name}` | {_type_name(p.type)} | `{_fmt(p.default)}` | {allowed} | '
+                    f'{"no" if p.read_only else "yes"} | {p.description} |')
+    return '\n'.join(rows)

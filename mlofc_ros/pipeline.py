@@ -1,0 +1,382 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""The per-frame pipeline, without ROS: gray image in, segments, labels and body motions out.
+
+Flow per frame: detect + track lines (:class:`~mlofc_ros.tracks.tracker.LineTracker`), undistort
+their endpoints (when the camera has distortion), push them into a sliding
+:class:`~mlofc_ros.tracks.window.TrackWindow` of the last ``window`` frames, segment the window
+with :func:`mlofc_ros.solver.segment_lines`, and keep body ids stable with
+:class:`~mlofc_ros.bodies.BodyTracker`. The node and the bag tool are thin shells around it.
+
+Example::
+
+    p = Pipeline(num_bodies=2, window=5)
+    for gray, t in frames:                  # (H, W) uint8, seconds
+        r = p.process(gray, t, camera=(fx, fy, cx, cy))
+        r.labels, r.angular_velocities      # (M,), (2, 3) rad/s
+"""
+from collections import deque
+from dataclasses import dataclass, field
+import math
+import time
+from typing import Any, Deque, Dict, Optional, Tuple
+
+import numpy as np
+
+from mlofc_ros import params as _params
+from mlofc_ros.bodies import BodyTracker, relabel
+from mlofc_ros.camera import as_camera, CameraLike, CameraModel
+from mlofc_ros.solver import segment_lines
+from mlofc_ros.tracks.tracker import LineTracker
+from mlofc_ros.tracks.undistort import undistort_segments
+from mlofc_ros.tracks.window import TrackWindow
+
+#: Keys of :attr:`FrameResult.timings` (milliseconds).
+TIMING_KEYS = ('detect_track', 'undistort', 'window', 'solve', 'total')
+
+
+@dataclass
+class FrameResult:
+    """What :meth:`Pipeline.process` returns for one frame.
+
+    Attributes
+    ----------
+    stamp : float
+        The frame's stamp, seconds.
+    segments : (M, 4) float32
+        Segments of this frame, ``(x1, y1, x2, y2)`` pixels as detected in the (distorted) image.
+    track_ids : (M,) uint32
+        Track id of every segment.
+    labels : (M,) int32
+        Stable body id of every segment, ``-1`` unassigned (new track, outlier, or no solve).
+    residuals : (M,) float32
+        Residual of every segment's track under its body (solver units, pixels-equivalent);
+        NaN when not solved.
+    angular_velocities : (n, 3) float64
+        Angular velocity of every stable body relative to the camera, rad/s, camera optical frame
+        (x right, y down, z forward); rad per frame divided by the window's median frame interval.
+    angular_covariances : (n, 3, 3) float64
+        Their covariances, (rad/s)^2; ``inf`` diagonal when undetermined.
+    body_valid : (n,) bool
+        True when the body's angular velocity and covariance are finite (solved this frame).
+    timings : dict
+        Milliseconds per stage: ``detect_track``, ``undistort``, ``window``, ``solve``, ``total``.
+    window_fill : int
+        Frames in the window (``1..window``).
+    problem : str or None
+        Why this frame gave no (or a degraded) result, for a warning; None when all went well.
+    focal_length : float
+        Focal length (px) the solver used or estimated; NaN when it did not run.
+    frame_interval : float
+        Median frame interval of the window (s); NaN with fewer than two frames.
+    n_tracks : int
+        Tracks handed to the solver.
+    skipped : bool
+        True when the frame was not processed at all (duplicate stamp): nothing to publish.
+    """
+
+    stamp: float
+    segments: np.ndarray
+    track_ids: np.ndarray
+    labels: np.ndarray
+    residuals: np.ndarray
+    angular_velocities: np.ndarray
+    angular_covariances: np.ndarray
+    body_valid: np.ndarray
+    timings: Dict[str, float] = field(default_factory=dict)
+    window_fill: int = 0
+    problem: Optional[str] = None
+    focal_length: float = math.nan
+    frame_interval: float = math.nan
+    n_tracks: int = 0
+    skipped: bool = False
+
+    @property
+    def solved(self) -> bool:
+        """True when at least one body has a valid angular velocity."""
+        return bool(np.any(self.body_valid))
+
+
+def _invalid_bodies(n: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    cov = np.zeros((n, 3, 3))
+    idx = np.arange(3)
+    cov[:, idx, idx] = math.inf
+    return np.full((n, 3), np.nan), cov, np.zeros(n, dtype=bool)
+
+
+def _lookup(keys: np.ndarray, table_keys: np.ndarray, table_values: np.ndarray,
+            fill: Any) -> np.ndarray:
+    """``table_values`` at the positions of ``keys`` in ``table_keys`` (``fill`` when absent)."""
+    keys = np.asarray(keys).astype(np.int64)
+    table_keys = np.asarray(table_keys).astype(np.int64)
+    out = np.full(keys.shape, fill, dtype=np.asarray(table_values).dtype if table_values.size
+                  else np.float64)
+    if not table_keys.size or not keys.size:
+        return out
+    order = np.argsort(table_keys, kind='stable')
+    sk = table_keys[order]
+    pos = np.clip(np.searchsorted(sk, keys), 0, sk.size - 1)
+    hit = sk[pos] == keys
+    out[hit] = np.asarray(table_values)[order][pos[hit]]
+    return out
+
+
+class Pipeline:
+    """Sliding-window motion segmentation of a gray image stream.
+
+    Keyword parameters are those of :mod:`mlofc_ros.params` (the node's ROS parameters, same
+    names and defaults); node-only ones (``queue_size``, ...) are accepted and ignored. Invalid
+    values raise ``ValueError``, unknown names ``TypeError``.
+    """
+
+    def __init__(self, **kwargs: Any) -> None:
+        unknown = sorted(set(kwargs) - set(_params.PARAMS))
+        if unknown:
+            raise TypeError(f'Pipeline got unknown parameters {unknown}')
+        self.params: Dict[str, Any] = _params.defaults()
+        self.params.update(_params.check_all(kwargs))
+        self.bodies = BodyTracker()
+        self._tracker = self._make_tracker()
+        self._window = TrackWindow(self.params['window'])
+        self._stamps: Deque[float] = deque(maxlen=self.params['window'])
+        self._intervals: Deque[float] = deque(maxlen=2 * _params.PARAMS['window'].range[1])
+        self._last_stamp: Optional[float] = None
+        self._image_size: Optional[Tuple[int, int]] = None
+        self._undistort_camera: Optional[CameraModel] = None
+
+    # --- configuration -------------------------------------------------------------------
+
+    def _make_tracker(self) -> LineTracker:
+        return LineTracker(min_length=float(self.params['min_segment_length']))
+
+    def reconfigure(self, **kwargs: Any) -> None:
+        """Change parameters at run time; resets only what the change invalidates.
+
+        ``window`` restarts the window; ``num_bodies`` restarts body numbering;
+        ``min_segment_length`` restarts the tracker and the window. Raises like the constructor,
+        changing nothing when any value is invalid.
+        """
+        unknown = sorted(set(kwargs) - set(_params.PARAMS))
+        if unknown:
+            raise TypeError(f'Pipeline got unknown parameters {unknown}')
+        new = _params.check_all(kwargs)
+        changed = {k for k, v in new.items() if self.params[k] != v}
+        self.params.update(new)
+        if 'min_segment_length' in changed:
+            self._tracker = self._make_tracker()
+            self.bodies.forget_tracks()
+            self._restart_window()
+        if 'window' in changed:
+            self._window = TrackWindow(self.params['window'])
+            self._stamps = deque(maxlen=self.params['window'])
+        if 'num_bodies' in changed:
+            self.bodies.reset()
+
+    def reset(self) -> None:
+        """Forget all state (tracks, window, body ids, stamps), as at construction."""
+        self._tracker.reset()
+        self._restart_window()
+        self.bodies.reset()
+        self._intervals.clear()
+        self._last_stamp = None
+        self._image_size = None
+
+    def _restart_window(self) -> None:
+        self._window.reset()
+        self._stamps.clear()
+
+    def _restart_tracks(self) -> None:
+        self._tracker.reset()
+        self.bodies.forget_tracks()
+        self._restart_window()
+
+    @property
+    def window_fill(self) -> int:
+        """Frames currently in the window."""
+        return len(self._stamps)
+
+    @property
+    def n_bodies(self) -> int:
+        """Bodies reported per frame (``num_bodies``, or the stable ids seen when automatic)."""
+        n = int(self.params['num_bodies'])
+        return n if n > 0 else self.bodies.n_slots
+
+    # --- per frame -----------------------------------------------------------------------
+
+    def _check_image(self, gray: np.ndarray) -> np.ndarray:
+        gray = np.asarray(gray)
+        if gray.ndim != 2:
+            raise ValueError(f'expected a (H, W) gray image, got shape {gray.shape}')
+        if gray.dtype != np.uint8:
+            raise ValueError(f'expected a uint8 gray image, got dtype {gray.dtype}')
+        if gray.shape[0] < 2 or gray.shape[1] < 2:
+            raise ValueError(f'image of {gray.shape[1]}x{gray.shape[0]} pixels is too small')
+        if gray.size > self.params['max_pixels']:
+            raise ValueError(f'image of {gray.shape[1]}x{gray.shape[0]} = {gray.size} pixels '
+                             f'exceeds max_pixels = {self.params["max_pixels"]}')
+        return gray
+
+    def _intrinsics(self, camera: Optional[CameraModel], size: Tuple[int, int]
+                    ) -> Tuple[Optional[Tuple[float, float, float, float]],
+                               Optional[CameraModel]]:
+        """Solver intrinsics (None = estimate f) and the camera to undistort with (or None)."""
+        f = float(self.params['focal_length'])
+        if f > 0:
+            return (f, f, size[0] / 2.0, size[1] / 2.0), None
+        if camera is None:
+            return None, None
+        return camera.intrinsics, (camera if camera.has_distortion else None)
+
+    def _empty(self, stamp: float, problem: Optional[str], skipped: bool = False
+               ) -> FrameResult:
+        w, c, v = _invalid_bodies(self.n_bodies)
+        return FrameResult(stamp, np.zeros((0, 4), np.float32), np.zeros(0, np.uint32),
+                           np.zeros(0, np.int32), np.zeros(0, np.float32), w, c, v,
+                           dict.fromkeys(TIMING_KEYS, 0.0), self.window_fill, problem,
+                           skipped=skipped)
+
+    def process(self, gray: np.ndarray, stamp_seconds: float,
+                camera: CameraLike = None) -> FrameResult:
+        """Process one frame and return the newest frame's segmentation.
+
+        Parameters
+        ----------
+        gray : (H, W) uint8
+            The image.
+        stamp_seconds : float
+            Its capture time (s); frame intervals (and so rad/s) come from the stamps.
+        camera : (fx, fy, cx, cy) | CameraModel | None
+            Intrinsics (px) and distortion of this image; None = unknown (focal length
+            estimated unless the ``focal_length`` parameter is set).
+
+        Raises ``ValueError`` for an unusable image or camera (wrong shape/dtype, too large, bad
+        intrinsics, non-finite stamp). Stamp jumps and too few tracks are not errors: they are
+        reported in :attr:`FrameResult.problem`.
+        """
+        t0 = time.perf_counter()
+        gray = self._check_image(gray)
+        stamp = float(stamp_seconds)
+        if not math.isfinite(stamp):
+            raise ValueError(f'stamp must be finite, got {stamp_seconds!r}')
+        cam = as_camera(camera)
+        size = (int(gray.shape[1]), int(gray.shape[0]))
+        problems = []
+
+        if self._image_size is not None and size != self._image_size:
+            problems.append(f'image size changed from {self._image_size[0]}x'
+                            f'{self._image_size[1]} to {size[0]}x{size[1]}; tracks restarted')
+            self._restart_tracks()
+            self._intervals.clear()
+        self._image_size = size
+
+        if self._last_stamp is not None:
+            dt = stamp - self._last_stamp
+            if dt == 0.0:
+                return self._empty(stamp, f'duplicate stamp {stamp:.9f} s; frame skipped',
+                                   skipped=True)
+            if dt < 0.0:
+                problems.append(f'stamp went back {-dt:.3f} s (bag loop or clock reset); '
+                                'tracks and window restarted')
+                self._restart_tracks()
+                self.bodies.reset()
+                self._intervals.clear()
+            else:
+                gap = float(self.params['max_frame_gap'])
+                nominal = float(np.median(self._intervals)) if self._intervals else math.nan
+                if gap > 0 and math.isfinite(nominal) and dt > gap * nominal:
+                    problems.append(f'{dt:.3f} s since the last frame (> {gap:g} x '
+                                    f'{nominal:.3f} s); window restarted')
+                    self._restart_tracks()
+                    self._intervals.clear()
+                else:
+                    self._intervals.append(dt)
+        self._last_stamp = stamp
+
+        intrinsics, undistort_cam = self._intrinsics(cam, size)
+        if undistort_cam != self._undistort_camera:
+            self._restart_window()        # stored endpoints were corrected with another model
+            self._undistort_camera = undistort_cam
+
+        timings: Dict[str, float] = {}
+        t = time.perf_counter()
+        track_ids, segments = self._tracker.update(gray)
+        track_ids = np.asarray(track_ids, dtype=np.uint32).ravel()
+        segments = np.asarray(segments, dtype=np.float32).reshape(-1, 4)
+        timings['detect_track'] = (time.perf_counter() - t) * 1e3
+
+        t = time.perf_counter()
+        corrected = segments
+        if undistort_cam is not None and len(segments):
+            corrected = np.asarray(undistort_segments(segments, undistort_cam),
+                                   dtype=np.float64).reshape(-1, 4)
+        timings['undistort'] = (time.perf_counter() - t) * 1e3
+
+        t = time.perf_counter()
+        self._window.push(track_ids, corrected)
+        self._stamps.append(stamp)
+        min_frames = min(int(self.params['min_track_frames']), len(self._stamps))
+        min_frames = max(min_frames, 2)
+        win_ids, win_tracks = self._window.tracks(min_frames=min_frames)
+        win_ids = np.asarray(win_ids).astype(np.int64).ravel()
+        timings['window'] = (time.perf_counter() - t) * 1e3
+
+        n_req = int(self.params['num_bodies'])
+        fill = len(self._stamps)
+        interval = float(np.median(np.diff(self._stamps))) if fill >= 2 else math.nan
+        labels = np.full(len(segments), -1, dtype=np.int32)
+        residuals = np.full(len(segments), np.nan, dtype=np.float32)
+        focal = math.nan
+        t = time.perf_counter()
+        res = None
+        if fill >= 2 and len(win_ids):
+            init = self.bodies.previous_labels(win_ids) if n_req > 0 else None
+            if init is not None:
+                init = np.where(init < n_req, init, -1)
+            try:
+                res = segment_lines(np.asarray(win_tracks, dtype=np.float64), n_req,
+                                    intrinsics=intrinsics, image_size=size,
+                                    method=self.params['method'], seed=int(self.params['seed']),
+                                    init_labels=init)
+            except (ValueError, NotImplementedError) as exc:
+                problems.append(f'solver: {exc}')
+        elif fill >= 2:
+            problems.append('no line tracks in the window')
+        timings['solve'] = (time.perf_counter() - t) * 1e3
+
+        if res is not None:
+            omega = np.asarray(res.angular_velocities, dtype=float).reshape(-1, 3) / interval
+            cov = np.asarray(res.angular_covariances, dtype=float).reshape(-1, 3, 3)
+            cov = cov / interval ** 2
+            valid = (np.all(np.isfinite(omega), axis=1)
+                     & np.all(np.isfinite(cov.reshape(len(cov), -1)), axis=1))
+            mapping = self.bodies.update(win_ids, res.labels, omega, valid)
+            n_out = max(self.n_bodies, int(mapping.max()) + 1 if mapping.size else 0)
+            w_out, c_out, v_out = _invalid_bodies(n_out)
+            w_out[mapping] = omega
+            c_out[mapping] = cov
+            v_out[mapping] = valid
+            stable = relabel(res.labels, mapping)
+            labels = _lookup(track_ids, win_ids, stable.astype(np.int32), -1).astype(np.int32)
+            residuals = _lookup(track_ids, win_ids,
+                                np.asarray(res.residuals, dtype=np.float32), np.nan)
+            focal = float(res.focal_length)
+        else:
+            w_out, c_out, v_out = _invalid_bodies(self.n_bodies)
+        timings['total'] = (time.perf_counter() - t0) * 1e3
+        return FrameResult(
+            stamp=stamp, segments=segments, track_ids=track_ids, labels=labels,
+            residuals=residuals.astype(np.float32), angular_velocities=w_out,
+            angular_covariances=c_out, body_valid=v_out, timings=timings, window_fill=fill,
+            problem='; '.join(problems) or None, focal_length=focal, frame_interval=interval,
+            n_tracks=int(len(win_ids)))
