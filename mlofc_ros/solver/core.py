@@ -1,0 +1,249 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""``segment_lines``: the public entry point of the solver."""
+from math import comb
+from typing import Optional, Sequence, Tuple
+
+import numpy as np
+
+from .focal import first_order_focal, profile_cost, refine_focal
+from .gpca import algebraic_normals
+from .ksubspaces import assign, ksubspaces, total_cost
+from .lines import cayley_jacobian, cayley_to_rotvec, line_flows, LineFlows, rotvec_to_cayley
+from .models import fit_bodies, track_costs
+from .result import SegmentationResult
+from .robust import noise_sigma, robust_segmentation
+
+#: Methods accepted by :func:`segment_lines`.
+METHODS = ('algebraic', 'kmeans', 'algebraic+kmeans', 'robust')
+
+#: Random restarts of the paper's K-means from a random labelling (the best is kept).
+KMEANS_RESTARTS = 10
+
+
+def _check_tracks(tracks) -> np.ndarray:
+    try:
+        arr = np.asarray(tracks, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'tracks must be a numeric array of shape (N, K, 4): {exc}') from None
+    if arr.ndim != 3 or arr.shape[2] != 4:
+        raise ValueError(f'tracks must have shape (N, K, 4) (endpoints u1, v1, u2, v2 per '
+                         f'frame), got {arr.shape}')
+    if arr.shape[1] < 2:
+        raise ValueError(f'tracks need K >= 2 frames, got K = {arr.shape[1]}')
+    if np.any(np.isinf(arr)):
+        raise ValueError('tracks contain infinite coordinates (use NaN for missing frames)')
+    # a frame counts only if all four coordinates are there and the endpoints differ
+    length = np.hypot(arr[..., 2] - arr[..., 0], arr[..., 3] - arr[..., 1])
+    bad = ~np.isfinite(arr).all(axis=2) | (length <= 1e-9)
+    arr = arr.copy()
+    arr[bad] = np.nan
+    return arr
+
+
+def _check_intrinsics(intrinsics, image_size, tracks: np.ndarray
+                      ) -> Tuple[Optional[Tuple[float, float, float, float]], Tuple[float, float]]:
+    if intrinsics is not None:
+        vals = np.asarray(intrinsics, dtype=float).ravel()
+        if vals.size != 4:
+            raise ValueError(f'intrinsics must be (fx, fy, cx, cy), got {vals.size} values')
+        if not np.all(np.isfinite(vals)):
+            raise ValueError(f'intrinsics must be finite, got {tuple(vals)}')
+        if vals[0] <= 0 or vals[1] <= 0:
+            raise ValueError(f'focal lengths must be > 0, got fx={vals[0]}, fy={vals[1]}')
+        size = (2.0 * vals[2], 2.0 * vals[3]) if image_size is None else image_size
+        return tuple(float(v) for v in vals), _check_size(size)
+    if image_size is None:
+        raise ValueError('image_size=(w, h) is needed when intrinsics are unknown (None)')
+    return None, _check_size(image_size)
+
+
+def _check_size(image_size) -> Tuple[float, float]:
+    vals = np.asarray(image_size, dtype=float).ravel()
+    if vals.size != 2 or not np.all(np.isfinite(vals)) or np.any(vals <= 0):
+        raise ValueError(f'image_size must be (w, h) > 0, got {image_size!r}')
+    return float(vals[0]), float(vals[1])
+
+
+def min_tracks_needed(n_bodies: int, n_frames: int, method: str, focal_known: bool) -> int:
+    """Fewest usable tracks (present in two consecutive frames) the model can be solved from.
+
+    Each track gives ``2 (K - 1)`` equations; the algebraic fit needs one fewer than the
+    number of monomials (``C(n + 3, 3)`` with known f, ``C(n + 5, 5)`` without); every body
+    needs two tracks.
+    """
+    per_body = 2 * n_bodies
+    dims = 4 if focal_known else 6
+    if method == 'robust' and focal_known:
+        return per_body
+    monomials = comb(n_bodies + dims - 1, dims - 1)
+    rows_per_track = 2 * max(n_frames - 1, 1)
+    return max(per_body, -(-(monomials - 1) // rows_per_track))
+
+
+def _solve_known_f(flows: LineFlows, tracks: np.ndarray, n: int, method: str,
+                   rng: np.random.Generator, init_labels=None):
+    """Labels, Cayley vectors, costs (weighted) and info for one method at known f."""
+    info = {}
+    if n == 1:
+        labels = np.where(flows.pairs_per_track() > 0, 0, -1)
+        if method == 'robust':
+            return robust_segmentation(flows, tracks, 1, rng, init_labels=labels)
+        c, _ = fit_bodies(flows, labels, 1, weighted=False)
+        return labels, c, track_costs(flows, c, weighted=True), info
+    weighted = method == 'robust'
+    if method == 'robust':
+        return robust_segmentation(flows, tracks, n, rng, init_labels=init_labels)
+    if method in ('algebraic', 'algebraic+kmeans'):
+        u = algebraic_normals(flows.rows.reshape(-1, 4), n)
+        c = u[:, :3]
+        labels = assign(track_costs(flows, c, weighted=False))
+        if method == 'algebraic+kmeans':
+            labels, c, _ = ksubspaces(flows, n, labels, weighted=False)
+    elif method == 'kmeans':
+        usable = flows.pairs_per_track() > 0
+        best = None
+        for _ in range(KMEANS_RESTARTS):
+            start = np.where(usable, rng.integers(0, n, flows.n_tracks), -1)
+            lab, cc, costs = ksubspaces(flows, n, start, weighted=weighted)
+            score = total_cost(costs, lab)
+            if best is None or score < best[0]:
+                best = (score, lab, cc)
+        _, labels, c = best
+    else:
+        raise ValueError(f'unknown method {method!r}; choose from {METHODS}')
+    return labels, c, track_costs(flows, c, weighted=True), info
+
+
+def _finish(flows: LineFlows, labels: np.ndarray, c: np.ndarray, costs: np.ndarray,
+            focal: float, method: str, info: dict) -> SegmentationResult:
+    n = c.shape[0]
+    dof = 2.0 * flows.pairs_per_track()
+    sigma = info.get('sigma_px') or noise_sigma(costs, labels, dof)
+    _, inf_mat = fit_bodies(flows, labels, n, weighted=True, c0=c, iterations=1)
+    counts = np.bincount(labels[labels >= 0], minlength=n)
+    jac = cayley_jacobian(c)
+    cov = np.full((n, 3, 3), np.inf)
+    for i in np.flatnonzero(counts >= 2):                 # n bodies, not a per-line loop
+        try:
+            cov_c = sigma ** 2 * np.linalg.inv(inf_mat[i])
+        except np.linalg.LinAlgError:
+            continue
+        cov[i] = jac[i] @ cov_c @ jac[i].T
+    assigned = np.where(labels >= 0, labels, np.argmin(np.nan_to_num(costs, nan=np.inf), axis=1)
+                        if n else 0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        rms = np.sqrt(costs[np.arange(costs.shape[0]), assigned] / dof)
+    rms[dof == 0] = np.nan
+    info = dict(info, sigma_px=float(sigma))
+    return SegmentationResult(labels=labels.astype(np.int64),
+                              angular_velocities=cayley_to_rotvec(c), angular_covariances=cov,
+                              focal_length=float(focal),
+                              residuals=rms, costs=costs, method=method, info=info)
+
+
+def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] = None,
+                  image_size: Optional[Sequence[float]] = None, method: str = 'robust', *,
+                  seed: int = 0, init_labels: Optional[np.ndarray] = None
+                  ) -> SegmentationResult:
+    """Segment line tracks into rigid bodies by their rotation (multibody line optical flow).
+
+    Parameters
+    ----------
+    tracks : (N, K, 4) array_like of float
+        N line tracks over K >= 2 consecutive frames, endpoints ``(u1, v1, u2, v2)`` in pixels
+        (undistorted), NaN where a track is missing. Endpoints need not correspond between
+        frames: only the line matters.
+    n_bodies : int
+        Number of rigid motions (>= 1; 0 = choose automatically).
+    intrinsics : (fx, fy, cx, cy), optional
+        Pixels. ``None``: principal point at the centre of ``image_size`` and the focal length
+        estimated (paper section 3.3, then refined with the exact known-f model).
+    image_size : (w, h), optional
+        Pixels; required when ``intrinsics`` is None.
+    method : {'algebraic', 'kmeans', 'algebraic+kmeans', 'robust'}
+        The paper's Algorithm 1 alone; the paper's K-means from a random start (best of
+        10 restarts); Algorithm 1 then K-means (the paper's best); ours (default).
+    seed : int
+        Seed of the random parts (K-means starts, sampling); results repeat for a seed.
+    init_labels : (N,) int, optional
+        Labels from a previous window (``-1`` unknown), an extra starting point for 'robust'.
+
+    Returns
+    -------
+    SegmentationResult
+        ``labels (N,)``, ``angular_velocities (n, 3)`` rad per frame interval in the camera
+        optical frame, ``angular_covariances``, ``focal_length`` (px), ``residuals (N,)``.
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, K < 2, non-finite intrinsics, ``n_bodies < 0``, unknown method, or fewer
+        usable tracks than the model needs.
+    """
+    if method not in METHODS:
+        raise ValueError(f'unknown method {method!r}; choose from {METHODS}')
+    if isinstance(n_bodies, bool) or int(n_bodies) != n_bodies:
+        raise ValueError(f'n_bodies must be an integer, got {n_bodies!r}')
+    n = int(n_bodies)
+    if n < 0:
+        raise ValueError(f'n_bodies must be >= 0 (0 = automatic), got {n}')
+    arr = _check_tracks(tracks)
+    intr, size = _check_intrinsics(intrinsics, image_size, arr)
+    if n == 0:
+        from .model_selection import select_bodies
+        return select_bodies(arr, intr, size, method, seed=seed)
+    ok = np.isfinite(arr[..., 0])
+    usable = int(np.sum(np.any(ok[:, :-1] & ok[:, 1:], axis=1)))
+    need = min_tracks_needed(n, arr.shape[1], method, intr is not None)
+    if usable < need:
+        raise ValueError(f'{usable} usable tracks (present in two consecutive frames), but '
+                         f'{n} bodies with method {method!r} need at least {need}')
+    rng = np.random.default_rng(seed)
+    if intr is not None:
+        flows = line_flows(arr, intr)
+        labels, c, costs, info = _solve_known_f(flows, arr, n, method, rng, init_labels)
+        return _finish(flows, labels, c, costs, intr[0], method, info)
+    # unknown focal length: first-order multibody estimate, then exact profile refinement
+    w, h = size
+    f0 = first_order_focal(arr, n, size)
+    info = {'focal_first_order': f0}
+    f = f0 if f0 is not None else float(max(w, h))
+    for span in (3.0, 1.2):
+        flows = line_flows(arr, (f, f, w / 2.0, h / 2.0))
+        labels, c, costs, sub = _solve_known_f(flows, arr, n, method, rng, init_labels)
+        f = refine_focal(profile_cost(arr, labels, n, (w / 2.0, h / 2.0)), f, span=span)
+    flows = line_flows(arr, (f, f, w / 2.0, h / 2.0))
+    labels, c, costs, sub = _solve_known_f(flows, arr, n, method, rng, init_labels)
+    return _finish(flows, labels, c, costs, f, method, dict(info, **sub))
+
+
+def assign_with_motions(tracks, angular_velocities, intrinsics: Sequence[float], *,
+                        weighted: bool = False) -> SegmentationResult:
+    """The floor: assign every track with GIVEN (true) motions, no estimation.
+
+    ``angular_velocities (n, 3)`` are rotation vectors in rad per frame interval (camera optical
+    frame). ``weighted=False`` uses the paper's algebraic residual, ``True`` the Mahalanobis
+    cost. No method can beat this on the same data with the same residual.
+    """
+    arr = _check_tracks(tracks)
+    intr, _ = _check_intrinsics(intrinsics, None, arr)
+    if intr is None:
+        raise ValueError('assign_with_motions needs intrinsics')
+    w = np.atleast_2d(np.asarray(angular_velocities, dtype=float))
+    c = rotvec_to_cayley(w)
+    flows = line_flows(arr, intr)
+    labels = assign(track_costs(flows, c, weighted=weighted))
+    return _finish(flows, labels, c, track_costs(flows, c, weighted=True), intr[0],
+                   'floor-weighted' if weighted else 'floor', {})

@@ -1,0 +1,89 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Algebraic multibody fit (GPCA): the paper's Algorithm 1 on rows of any dimension.
+
+Every row ``y`` of a body lies on that body's hyperplane ``y . u_i = 0`` (``u_i`` has last
+entry 1), so every row satisfies ``p(y) = prod_i (y . u_i) = nu_n(y) . U = 0``. ``U`` is the
+null vector of the embedded rows; each ``u_i`` is the gradient of ``p`` at a row of body ``i``.
+"""
+from typing import Optional
+
+import numpy as np
+
+from .veronese import embed, gradient
+
+
+def balance_scale(rows: np.ndarray) -> float:
+    """Scale for the last coordinate so it is as large as the others on average.
+
+    The last entry of a row is a flow (radians per frame, small) while the others are O(1):
+    without balancing the high powers of the last coordinate drown in rounding.
+    """
+    head = np.sqrt(np.mean(rows[:, :-1] ** 2))
+    tail = np.sqrt(np.mean(rows[:, -1] ** 2))
+    return float(tail / head) if tail > 0 and head > 0 else 1.0
+
+
+def multibody_vector(rows: np.ndarray, degree: int,
+                     relations: Optional[np.ndarray] = None) -> np.ndarray:
+    """Null vector ``U (M,)`` of the Veronese-embedded rows ``(R, D)``.
+
+    ``relations (M, q)``: polynomials known to vanish on every possible row (structural zeros
+    or the hypersurface of the f-unknown rows); ``U`` is sought orthogonal to them so that the
+    null space is one-dimensional.
+    """
+    v = embed(rows, degree)
+    if relations is not None and relations.shape[1]:
+        q, _ = np.linalg.qr(relations, mode='complete')
+        basis = q[:, relations.shape[1]:]                    # orthonormal complement
+        _, _, vt = np.linalg.svd(v @ basis, full_matrices=False)
+        return basis @ vt[-1]
+    _, _, vt = np.linalg.svd(v, full_matrices=False)
+    return vt[-1]
+
+
+def recover_normals(rows: np.ndarray, coeffs: np.ndarray, degree: int, n: int,
+                    delta: float = 1e-10) -> np.ndarray:
+    """The paper's Algorithm 1, step 5: hyperplane normals ``(n, D)`` (last entry 1).
+
+    For ``i = n .. 1`` pick the row minimising
+    ``(|p(z)| / |Pi grad p(z)| + delta) / (prod_{l>i} |z . u_l| / |Pi u_l| + delta)``
+    (``Pi`` drops the last coordinate): a row close to one hyperplane and far from those already
+    found. Its gradient is normal to its own hyperplane.
+    """
+    p = embed(rows, degree) @ coeffs
+    grad = gradient(rows, coeffs, degree)
+    dist = np.abs(p) / np.maximum(np.linalg.norm(grad[:, :-1], axis=1), 1e-300)
+    usable = np.abs(grad[:, -1]) > 1e-12 * np.max(np.abs(grad))
+    far = np.ones(rows.shape[0])
+    normals = []
+    for _ in range(n):
+        score = (dist + delta) / (far + delta)
+        score[~usable] = np.inf
+        z = int(np.argmin(score))
+        u = grad[z] / grad[z, -1]
+        normals.append(u)
+        far = far * np.abs(rows @ u) / max(np.linalg.norm(u[:-1]), 1e-300)
+    return np.array(normals)
+
+
+def algebraic_normals(rows: np.ndarray, n: int,
+                      relations: Optional[np.ndarray] = None) -> np.ndarray:
+    """Balanced GPCA: hyperplane normals ``(n, D)`` with last entry 1, in the rows' own units."""
+    s = balance_scale(rows)
+    scaled = rows.copy()
+    scaled[:, -1] /= s
+    u = recover_normals(scaled, multibody_vector(scaled, n, relations), n, n)
+    # y . u = y' . u' with y'_D = y_D / s, u'_D = s u_D: undo the scaling
+    return np.concatenate([u[:, :-1] * s, np.ones((n, 1))], axis=1)

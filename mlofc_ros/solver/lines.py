@@ -1,0 +1,241 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Interpretation-plane normals of line tracks, their noise, and the exact Cayley line flow.
+
+A segment with normalised endpoints ``x_a, x_b`` (``x = K^-1 [u, v, 1]``) spans the plane through
+the camera centre with unit normal ``m = x_a x x_b / |x_a x x_b|``. A rotation ``R`` of the body
+about the camera centre maps ``m`` to ``m' = R m`` exactly. With the Cayley vector ``c`` of ``R``
+(``R = (I - [c]x/2)^-1 (I + [c]x/2)``, ``c = 2 tan(theta/2) k``),
+``m' - m = c x m_bar`` with ``m_bar = (m + m')/2``, exactly. Projecting on an orthonormal pair
+``e_1, e_2`` orthogonal to ``m_bar`` gives two equations per frame pair, linear in ``c``::
+
+    r_j = e_j . (c x m_bar) - e_j . (m' - m) = (M c - b)_j,  M = -E^T [m_bar]x,  b = E^T (m' - m)
+
+so the row ``y_j = [m_bar x e_j ; -(e_j . g)]`` of R^4 is orthogonal to ``u = [c ; 1]``.
+"""
+from dataclasses import dataclass
+from typing import Tuple
+
+import numpy as np
+
+Intrinsics = Tuple[float, float, float, float]
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrices ``(..., 3, 3)`` of vectors ``(..., 3)``."""
+    v = np.asarray(v, dtype=float)
+    out = np.zeros(v.shape + (3,))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+def cayley_to_rotvec(c: np.ndarray) -> np.ndarray:
+    """Cayley vectors ``(..., 3)`` -> rotation vectors ``theta k`` (rad), theta = 2 atan(|c|/2)."""
+    c = np.asarray(c, dtype=float)
+    n = np.linalg.norm(c, axis=-1, keepdims=True)
+    scale = np.where(n > 1e-12, 2.0 * np.arctan(n / 2.0) / np.maximum(n, 1e-300), 1.0)
+    return c * scale
+
+
+def rotvec_to_cayley(w: np.ndarray) -> np.ndarray:
+    """Rotation vectors ``(..., 3)`` (rad, |w| < pi) -> Cayley vectors ``2 tan(theta/2) k``."""
+    w = np.asarray(w, dtype=float)
+    t = np.linalg.norm(w, axis=-1, keepdims=True)
+    scale = np.where(t > 1e-12, 2.0 * np.tan(t / 2.0) / np.maximum(t, 1e-300), 1.0)
+    return w * scale
+
+
+def cayley_jacobian(c: np.ndarray) -> np.ndarray:
+    """Jacobian ``(..., 3, 3)`` of :func:`cayley_to_rotvec` (to carry covariances)."""
+    c = np.asarray(c, dtype=float)
+    n = np.linalg.norm(c, axis=-1)[..., None, None]
+    safe = np.maximum(n, 1e-12)
+    s = 2.0 * np.arctan(safe / 2.0) / safe
+    ds = (1.0 / (1.0 + safe ** 2 / 4.0) - s) / safe          # d s / d |c|
+    outer = c[..., :, None] * c[..., None, :] / safe
+    return s * np.eye(3) + ds * outer
+
+
+def rotation_matrix(w: np.ndarray) -> np.ndarray:
+    """Rodrigues: rotation vectors ``(..., 3)`` (rad) -> rotation matrices ``(..., 3, 3)``."""
+    w = np.asarray(w, dtype=float)
+    t = np.linalg.norm(w, axis=-1)[..., None, None]
+    k = skew(w) / np.maximum(t, 1e-300)
+    small = t < 1e-12
+    r = np.eye(3) + np.sin(t) * k + (1.0 - np.cos(t)) * (k @ k)
+    return np.where(small, np.eye(3) + skew(w), r)
+
+
+def normalise_points(uv: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+    """Pixels ``(..., 2)`` -> homogeneous normalised points ``(..., 3)`` ``K^-1 [u, v, 1]``."""
+    fx, fy, cx, cy = intrinsics
+    out = np.empty(uv.shape[:-1] + (3,))
+    out[..., 0] = (uv[..., 0] - cx) / fx
+    out[..., 1] = (uv[..., 1] - cy) / fy
+    out[..., 2] = 1.0
+    return out
+
+
+def interpretation_normals(tracks: np.ndarray, intrinsics: Intrinsics,
+                           endpoint_sigma: float = 1.0) -> Tuple[np.ndarray, np.ndarray]:
+    """Unit normals ``m`` and their covariance for every track and frame.
+
+    Parameters
+    ----------
+    tracks : (N, K, 4) float
+        Endpoints ``(u1, v1, u2, v2)`` in pixels, NaN where missing.
+    intrinsics : (fx, fy, cx, cy)
+        Pixels.
+    endpoint_sigma : float
+        Standard deviation of each endpoint coordinate (px) the covariance is computed for.
+
+    Returns
+    -------
+    m : (N, K, 3) float64
+        Unit normals (NaN where missing), signs made consistent along each track
+        (``m_t . m_prev > 0`` against the previous present frame).
+    cov : (N, K, 3, 3) float64
+        Covariance of ``m`` from isotropic endpoint noise (rank 2: orthogonal to ``m``). Short
+        segments and segments far from the principal point are noisier.
+    """
+    xa = normalise_points(tracks[..., 0:2], intrinsics)
+    xb = normalise_points(tracks[..., 2:4], intrinsics)
+    n = np.cross(xa, xb)
+    norm = np.linalg.norm(n, axis=-1, keepdims=True)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        m = n / norm
+    # consistent sign along each track: compare with the previous present frame (vectorised
+    # over tracks; the loop runs over the few frames of the window)
+    last = np.full(m.shape[0:1] + (3,), np.nan)
+    for k in range(m.shape[1]):
+        flip = np.einsum('ij,ij->i', m[:, k], last) < 0
+        m[flip, k] *= -1.0
+        ok = np.isfinite(m[:, k, 0])
+        last[ok] = m[ok, k]
+    # d m = P / |n| d n,  d n = -[x_b]x d x_a + [x_a]x d x_b,  d x = K^-1[:, :2] d(u, v)
+    fx, fy = intrinsics[0], intrinsics[1]
+    kinv2 = np.array([[1.0 / fx, 0.0], [0.0, 1.0 / fy], [0.0, 0.0]])
+    proj = (np.eye(3) - m[..., :, None] * m[..., None, :]) / norm[..., None]
+    ja = -proj @ skew(xb) @ kinv2
+    jb = proj @ skew(xa) @ kinv2
+    cov = endpoint_sigma ** 2 * (ja @ np.swapaxes(ja, -1, -2) + jb @ np.swapaxes(jb, -1, -2))
+    return m, cov
+
+
+def orthonormal_pair(m: np.ndarray) -> np.ndarray:
+    """Orthonormal basis ``E (..., 3, 2)`` of the plane orthogonal to each vector ``m (..., 3)``.
+
+    Built from the axis least aligned with ``m`` so it is well conditioned for every direction
+    (vertical image lines included).
+    """
+    m = m / np.linalg.norm(m, axis=-1, keepdims=True)
+    axis = np.zeros_like(m)
+    idx = np.argmin(np.abs(m), axis=-1)
+    np.put_along_axis(axis, idx[..., None], 1.0, axis=-1)
+    e1 = np.cross(m, axis)
+    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
+    e2 = np.cross(m, e1)
+    return np.stack([e1, e2], axis=-1)
+
+
+@dataclass
+class LineFlows:
+    """Line flows of every consecutive frame pair where a track is present in both frames.
+
+    ``P`` pairs; each gives two equations ``r = M c - b`` for its body's Cayley vector ``c``.
+    ``cov0``/``cov1`` are the normal covariances for 1 px endpoint noise.
+    """
+
+    n_tracks: int
+    pair_track: np.ndarray   # (P,) int: track index of each pair
+    m0: np.ndarray           # (P, 3) normal in the earlier frame
+    m1: np.ndarray           # (P, 3) normal in the later frame
+    cov0: np.ndarray         # (P, 3, 3)
+    cov1: np.ndarray         # (P, 3, 3)
+    E: np.ndarray            # (P, 3, 2) orthonormal pair orthogonal to m_bar
+    M: np.ndarray            # (P, 2, 3)
+    b: np.ndarray            # (P, 2)
+
+    @property
+    def n_pairs(self) -> int:
+        return int(self.pair_track.shape[0])
+
+    @property
+    def rows(self) -> np.ndarray:
+        """``(P, 2, 4)`` rows ``y = [M_j, -b_j]`` with ``y . [c ; 1] = r_j``."""
+        return np.concatenate([self.M, -self.b[..., None]], axis=-1)
+
+    def pairs_per_track(self) -> np.ndarray:
+        """``(N,)`` number of frame pairs of every track."""
+        return np.bincount(self.pair_track, minlength=self.n_tracks)
+
+    def subset(self, keep: np.ndarray) -> 'LineFlows':
+        """Flows of the pairs selected by a boolean or index array (track indices unchanged)."""
+        return LineFlows(self.n_tracks, self.pair_track[keep], self.m0[keep], self.m1[keep],
+                         self.cov0[keep], self.cov1[keep], self.E[keep], self.M[keep],
+                         self.b[keep])
+
+
+def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
+    """Exact (Cayley midpoint) line flows of a window of tracks; see the module docstring.
+
+    Parameters
+    ----------
+    tracks : (N, K, 4) float
+        Endpoints in pixels, NaN where missing; only consecutive present frames form pairs.
+    intrinsics : (fx, fy, cx, cy)
+        Pixels.
+    """
+    m, cov = interpretation_normals(tracks, intrinsics)
+    ok = np.isfinite(m[..., 0])
+    pair_ok = ok[:, :-1] & ok[:, 1:]
+    ti, ki = np.nonzero(pair_ok)
+    m0, m1 = m[ti, ki], m[ti, ki + 1]
+    mbar = 0.5 * (m0 + m1)
+    E = orthonormal_pair(mbar)
+    Et = np.swapaxes(E, -1, -2)
+    M = -Et @ skew(mbar)
+    b = np.einsum('pjk,pk->pj', Et, m1 - m0)
+    return LineFlows(tracks.shape[0], ti, m0, m1, cov[ti, ki], cov[ti, ki + 1], E, M, b)
+
+
+def residual_covariance(flows: LineFlows, c: np.ndarray) -> np.ndarray:
+    """Covariance ``(P, n, 2, 2)`` of ``r = E^T((I + [c]x/2) m - (I - [c]x/2) m')`` per body.
+
+    ``c`` is ``(n, 3)``; for 1 px endpoint noise. The residual's derivative with respect to
+    ``E`` vanishes at the solution, so ``E`` is treated as fixed.
+    """
+    half = 0.5 * skew(c)                                   # (n, 3, 3)
+    a = np.eye(3) + half
+    bm = np.eye(3) - half
+    Et = np.swapaxes(flows.E, -1, -2)[:, None]             # (P, 1, 2, 3)
+    ea = Et @ a[None]                                      # (P, n, 2, 3)
+    eb = Et @ bm[None]
+    return (ea @ flows.cov0[:, None] @ np.swapaxes(ea, -1, -2)
+            + eb @ flows.cov1[:, None] @ np.swapaxes(eb, -1, -2))
+
+
+def inv2(s: np.ndarray) -> np.ndarray:
+    """Inverse of 2x2 matrices ``(..., 2, 2)`` (closed form, regularised when singular)."""
+    det = s[..., 0, 0] * s[..., 1, 1] - s[..., 0, 1] * s[..., 1, 0]
+    tiny = 1e-30 + 1e-12 * (s[..., 0, 0] * s[..., 1, 1])
+    det = np.where(np.abs(det) < tiny, tiny, det)
+    out = np.empty_like(s)
+    out[..., 0, 0] = s[..., 1, 1] / det
+    out[..., 1, 1] = s[..., 0, 0] / det
+    out[..., 0, 1] = -s[..., 0, 1] / det
+    out[..., 1, 0] = -s[..., 1, 0] / det
+    return out
