@@ -38,20 +38,15 @@ from std_msgs.msg import Header
 
 from mlofc_ros.camera import CameraModel
 from mlofc_ros.messages.images import bgr8_fields
-from mlofc_ros.messages.segments import pack_segments, SEGMENT_FIELDS, unpack_segments
+from mlofc_ros.messages.segments import (segment_cloud_fields, SEGMENT_FIELDS,
+                                         SEGMENT_POINT_STEP, unpack_segments)
 
 #: Variance ((m/s)^2) on the diagonal of the linear part of every twist covariance: the
 #: rotation-only model does not observe translation, so it is marked as unknown.
 LINEAR_UNKNOWN_VARIANCE = 1.0e9
 
-#: Size in bytes of each ``sensor_msgs/PointField`` datatype.
-_DATATYPE_SIZES = {PointField.INT8: 1, PointField.UINT8: 1, PointField.INT16: 2,
-                   PointField.UINT16: 2, PointField.INT32: 4, PointField.UINT32: 4,
-                   PointField.FLOAT32: 4, PointField.FLOAT64: 8}
-
-#: Bytes per point of ``~/segments`` (from ``SEGMENT_FIELDS``).
-POINT_STEP = max(int(off) + _DATATYPE_SIZES[int(dt)] * int(cnt)
-                 for _, off, dt, cnt in SEGMENT_FIELDS)
+#: Bytes per point of ``~/segments``.
+POINT_STEP = SEGMENT_POINT_STEP
 
 
 def stamp_to_seconds(stamp: Time) -> float:
@@ -80,24 +75,20 @@ def segments_msg(header: Header, segments: np.ndarray, track_ids: np.ndarray,
         Stable body id of every segment, -1 unassigned.
     residuals : (M,) float
         Residual of every segment under its body in pixels (NaN when not solved).
+
+    The cloud is ``is_dense`` (every point is a valid segment; NaN residual = not solved).
     """
-    data = bytes(pack_segments(segments, track_ids, labels, residuals))
-    m = int(np.asarray(segments).reshape(-1, 4).shape[0])
-    if len(data) != POINT_STEP * m:
-        raise ValueError(f'pack_segments gave {len(data)} bytes for {m} segments, '
-                         f'expected {POINT_STEP} per segment')
-    fields = segment_fields()
+    f = segment_cloud_fields(segments, track_ids, labels, residuals)
     msg = PointCloud2()
     msg.header = header
-    msg.height = 1
-    msg.width = m
-    msg.fields = fields
-    msg.is_bigendian = False
-    msg.point_step = POINT_STEP
-    msg.row_step = POINT_STEP * m
-    msg.data = data
-    res = np.asarray(residuals, dtype=float)
-    msg.is_dense = bool(np.all(np.isfinite(res))) if m else True
+    msg.height = int(f['height'])
+    msg.width = int(f['width'])
+    msg.fields = segment_fields()
+    msg.is_bigendian = bool(f['is_bigendian'])
+    msg.point_step = int(f['point_step'])
+    msg.row_step = int(f['row_step'])
+    msg.data = bytes(f['data'])
+    msg.is_dense = bool(f['is_dense'])
     return msg
 
 
@@ -112,11 +103,11 @@ def parse_segments_msg(msg: PointCloud2) -> Tuple[np.ndarray, np.ndarray, np.nda
         raise ValueError(f'~/segments field layout {got} differs from SEGMENT_FIELDS {want}')
     if msg.is_bigendian:
         raise ValueError('~/segments cloud is big-endian; expected little-endian')
-    out = unpack_segments(bytes(msg.data))
-    if isinstance(out, np.ndarray) and out.dtype.names:
-        segs = np.stack([out[k] for k in ('x1', 'y1', 'x2', 'y2')], axis=-1)
-        return segs, out['track_id'], out['label'], out['residual']
-    return tuple(out)
+    if msg.point_step != POINT_STEP:
+        raise ValueError(f'~/segments point_step is {msg.point_step}, expected {POINT_STEP}')
+    out = unpack_segments(msg.data)
+    segs = np.stack([out[k] for k in ('x1', 'y1', 'x2', 'y2')], axis=-1)
+    return segs, out['track_id'], out['label'], out['residual']
 
 
 def twist_msg(header: Header, angular_velocity: np.ndarray,
