@@ -217,14 +217,26 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         return _finish(flows, labels, c, costs, intr[0], method, info)
     # unknown focal length: first-order multibody estimate, then exact profile refinement
     w, h = size
+    centre = (w / 2.0, h / 2.0)
     f0 = first_order_focal(arr, n, size)
     info = {'focal_first_order': f0}
-    f = f0 if f0 is not None else float(max(w, h))
+    if f0 is None:
+        # eq. (18) undetermined (e.g. sum of w1 and w2 over bodies ~ 0): scan a wide range and
+        # keep the focal length whose known-f solution explains the tracks best
+        scan = []
+        for f in max(w, h) * np.geomspace(0.3, 3.0, 9):
+            flows = line_flows(arr, (f, f) + centre)
+            labels, _, costs, _ = _solve_known_f(flows, arr, n, 'algebraic+kmeans', rng)
+            scan.append((total_cost(costs, labels), f))
+        f0 = min(scan)[1]
+    # the refinement segments with our robust method whatever the requested one: f is a
+    # property of the camera, and the first-order estimate can be ~10% off for n = 4
+    f = f0
     for span in (3.0, 1.2):
-        flows = line_flows(arr, (f, f, w / 2.0, h / 2.0))
-        labels, c, costs, sub = _solve_known_f(flows, arr, n, method, rng, init_labels)
-        f = refine_focal(profile_cost(arr, labels, n, (w / 2.0, h / 2.0)), f, span=span)
-    flows = line_flows(arr, (f, f, w / 2.0, h / 2.0))
+        flows = line_flows(arr, (f, f) + centre)
+        labels, c, costs, sub = _solve_known_f(flows, arr, n, 'robust', rng, init_labels)
+        f = refine_focal(profile_cost(arr, labels, n, centre), f, span=span)
+    flows = line_flows(arr, (f, f) + centre)
     labels, c, costs, sub = _solve_known_f(flows, arr, n, method, rng, init_labels)
     return _finish(flows, labels, c, costs, f, method, dict(info, **sub))
 

@@ -80,10 +80,10 @@ def recover_normals(rows: np.ndarray, coeffs: np.ndarray, degree: int, n: int,
 
 def algebraic_normals(rows: np.ndarray, n: int,
                       relations: Optional[np.ndarray] = None) -> np.ndarray:
-    """Balanced GPCA: hyperplane normals ``(n, D)`` with last entry 1, in the rows' own units."""
-    s = balance_scale(rows)
-    scaled = rows.copy()
-    scaled[:, -1] /= s
-    u = recover_normals(scaled, multibody_vector(scaled, n, relations), n, n)
-    # y . u = y' . u' with y'_D = y_D / s, u'_D = s u_D: undo the scaling
-    return np.concatenate([u[:, :-1] * s, np.ones((n, 1))], axis=1)
+    """GPCA: hyperplane normals ``(n, D)`` with last entry 1, from rows ``(R, D)``.
+
+    The rows are used as they are: rescaling the small last coordinate (the flow) to the size
+    of the others amplifies its noise in the least-squares fit of ``U`` (measured: 7% -> 17%
+    misclassified at 1 px, n = 2), while zero-noise precision is the same either way.
+    """
+    return recover_normals(rows, multibody_vector(rows, n, relations), n, n)

@@ -29,8 +29,8 @@ import numpy as np
 
 from .gpca import algebraic_normals
 from .ksubspaces import assign, ksubspaces, total_cost
-from .lines import LineFlows, residual_covariance
-from .models import chi2_quantile, track_costs
+from .lines import inv2, LineFlows, residual_covariance
+from .models import chi2_quantile, solve_normal_equations, track_costs
 
 #: Outlier level: a track is rejected when its cost exceeds this chi-square quantile.
 OUTLIER_P = 0.999
@@ -85,7 +85,7 @@ def sequential_msac(flows: LineFlows, tracks: np.ndarray, n: int, sigma: float, 
     mid = _midpoints(tracks)
     # per-track normal equations (weights at c = 0) so a 2-track hypothesis is one 3x3 solve
     s = residual_covariance(flows, np.zeros((1, 3)))[:, 0]
-    w = np.linalg.inv(s + 1e-30 * np.eye(2))
+    w = inv2(s)
     mtw = np.swapaxes(flows.M, 1, 2) @ w
     info = np.zeros((flows.n_tracks, 3, 3))
     rhs = np.zeros((flows.n_tracks, 3))
@@ -98,8 +98,8 @@ def sequential_msac(flows: LineFlows, tracks: np.ndarray, n: int, sigma: float, 
         if pool.size < 2:
             break
         pairs = _sample_pairs(rng, pool, mid, n_samples)
-        a = info[pairs[:, 0]] + info[pairs[:, 1]] + 1e-12 * np.eye(3)
-        hyp = np.linalg.solve(a, (rhs[pairs[:, 0]] + rhs[pairs[:, 1]])[..., None])[..., 0]
+        hyp = solve_normal_equations(info[pairs[:, 0]] + info[pairs[:, 1]],
+                                     rhs[pairs[:, 0]] + rhs[pairs[:, 1]])
         costs = track_costs(flows, hyp, weighted=True)[pool]          # (|pool|, H)
         score = np.sum(np.minimum(costs, cap[pool, None]), axis=0)
         best = int(np.argmin(score))
