@@ -116,7 +116,11 @@ class _Warp:
         uu, vv = np.meshgrid(np.arange(width, dtype=np.float64),
                              np.arange(height, dtype=np.float64))
         grid = np.stack([uu.ravel(), vv.ravel()], axis=1).reshape(-1, 1, 2)
-        und = cv2.undistortPointsIter(grid, self.K, d, None, self.K, crit).reshape(-1, 2)
+        if hasattr(cv2, 'undistortPointsIter'):     # OpenCV 4
+            und = cv2.undistortPointsIter(grid, self.K, d, None, self.K, crit)
+        else:                                        # OpenCV 5 takes the criteria directly
+            und = cv2.undistortPoints(grid, self.K, d, R=None, P=self.K, criteria=crit)
+        und = und.reshape(-1, 2)
         back = distort_pixels(und, self.K, d)
         err = np.abs(back - grid.reshape(-1, 2)).max()
         if not np.all(np.isfinite(und)) or err > 0.05:
@@ -140,7 +144,7 @@ class _Warp:
         return self.origin[0], self.origin[1], self.shape[1], self.shape[0]
 
     def pinhole_crop(self, canvas: np.ndarray) -> np.ndarray:
-        """The (H, W) part of the canvas that covers the output image's pinhole pixels."""
+        """Return the (H, W) part of the canvas under the output image's pinhole pixels."""
         width, height = self.size
         u0, v0 = self.origin
         return canvas[-v0:-v0 + height, -u0:-u0 + width]
@@ -153,20 +157,32 @@ class _Warp:
                          borderMode=cv2.BORDER_REPLICATE)
 
 
+def _project(points: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Pinhole projection of camera-frame points (..., 3) to pixels (..., 2)."""
+    return points[..., :2] / points[..., 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+
+
 def _render_frame(bodies: List[Body], face_offset: np.ndarray, edge_offset: np.ndarray,
                   t: float, warp: _Warp) -> Tuple[np.ndarray, np.ndarray, np.ndarray,
                                                   np.ndarray, np.ndarray, np.ndarray]:
-    """Rasterise all bodies at time ``t``; return canvas, id buffer and the edge truth inputs."""
+    """Rasterise all bodies at time ``t`` seconds.
+
+    Returns ``(canvas (Hc, Wc) uint8, face ids (Hc, Wc) int32, p1 (N, 2), p2 (N, 2) px,
+    faces (N, 2) global face ids, (body id, edge id) (N, 2))`` for the N candidate edges
+    (those bounding a front face), in undistorted image pixels.
+    """
     K = warp.K
-    u0, v0 = warp.origin
-    shift = np.array([u0, v0], dtype=float)
+    shift = np.array(warp.origin, dtype=float)
     canvas = np.zeros(warp.shape, dtype=np.uint8)
     ids = np.full(warp.shape, -1, dtype=np.int32)
     poses = [b.pose(t) for b in bodies]
     # painter's order: the background, then boxes far to near (by centre depth)
     order = sorted(range(len(bodies)),
                    key=lambda i: (bodies[i].name != 'background', -poses[i][1][2]))
-    p1s, p2s, faces_all, body_all, edge_all = [], [], [], [], []
+    verts, nxt, starts, expand, greys, draw = [], [], [], [], [], []
+    rects, rect_ids = [], []
+    p1s, p2s, faces_all, body_edge = [], [], [], []
+    n_verts = 0
     for i in order:
         body = bodies[i]
         rot, cen = poses[i]
@@ -175,43 +191,41 @@ def _render_frame(bodies: List[Body], face_offset: np.ndarray, edge_offset: np.n
         front = np.einsum('ij,ij->i', n_cam, pt_cam) < 0
         if not np.any(front):
             continue
-        v_cam = body.verts @ rot.T + cen
-        uv = v_cam[:, :2] / v_cam[:, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]] - shift
-        sizes = np.diff(body.poly_start)
-        vert_face = np.repeat(body.poly_face, sizes)
+        verts.append(body.verts @ rot.T + cen)
+        nxt.append(body.vert_next + n_verts)
+        starts.append(body.poly_start[:-1] + n_verts)
         other = body.vert_other_face
-        expand = (other >= 0) & front[np.maximum(other, 0)] & (vert_face < other)
-        fixed = to_fixed(offset_polygons(uv, body.vert_next, body.poly_start, expand))
-        starts = body.poly_start
-        for p in np.nonzero(front[body.poly_face])[0]:
-            cv2.fillConvexPoly(canvas, fixed[starts[p]:starts[p + 1]],
-                               int(round(body.poly_grey[p])), cv2.LINE_AA, SHIFT)
-        rect_cam = body.face_rect[front] @ rot.T + cen
-        rect_uv = (rect_cam[..., :2] / rect_cam[..., 2:] * [K[0, 0], K[1, 1]]
-                   + [K[0, 2], K[1, 2]] - shift)
-        rect_fixed = to_fixed(rect_uv.reshape(-1, 2)).reshape(-1, 4, 2)
-        for f, pts in zip(np.nonzero(front)[0], rect_fixed):
-            cv2.fillConvexPoly(ids, pts, int(face_offset[i] + f), cv2.LINE_8, SHIFT)
+        vert_face = np.repeat(body.poly_face, np.diff(body.poly_start))
+        expand.append((other >= 0) & front[np.maximum(other, 0)] & (vert_face < other))
+        greys.append(body.poly_grey)
+        draw.append(front[body.poly_face])
+        n_verts += len(body.verts)
+        rects.append(body.face_rect[front] @ rot.T + cen)
+        rect_ids.append(face_offset[i] + np.nonzero(front)[0])
         # edges bounding at least one front face
         ef = body.edge_faces
-        cand = front[ef[:, 0]] | ((ef[:, 1] >= 0) & front[np.maximum(ef[:, 1], 0)])
-        if not np.any(cand):
-            continue
-        a = body.edge_a[cand] @ rot.T + cen
-        b = body.edge_b[cand] @ rot.T + cen
-        p1s.append(a[:, :2] / a[:, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]])
-        p2s.append(b[:, :2] / b[:, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]])
-        ef = ef[cand]
-        faces_all.append(np.where(ef >= 0, ef + face_offset[i], -1))
-        body_all.append(np.full(len(a), i, dtype=np.int64))
-        edge_all.append(edge_offset[i] + np.nonzero(cand)[0])
-    if p1s:
-        return (canvas, ids, np.concatenate(p1s), np.concatenate(p2s),
-                np.concatenate(faces_all), np.stack([np.concatenate(body_all),
-                                                     np.concatenate(edge_all)], axis=1))
-    empty = np.zeros((0, 2))
-    return (canvas, ids, empty, empty, np.zeros((0, 2), dtype=np.int64),
-            np.zeros((0, 2), dtype=np.int64))
+        cand = np.nonzero(front[ef[:, 0]] | ((ef[:, 1] >= 0) & front[np.maximum(ef[:, 1], 0)]))[0]
+        p1s.append(body.edge_a[cand] @ rot.T + cen)
+        p2s.append(body.edge_b[cand] @ rot.T + cen)
+        faces_all.append(np.where(ef[cand] >= 0, ef[cand] + face_offset[i], -1))
+        body_edge.append(np.stack([np.full(len(cand), i), edge_offset[i] + cand], axis=1))
+    if not verts:
+        empty = np.zeros((0, 2))
+        return (canvas, ids, empty, empty, np.zeros((0, 2), dtype=np.int64),
+                np.zeros((0, 2), dtype=np.int64))
+    uv = _project(np.concatenate(verts), K) - shift
+    poly_start = np.concatenate(starts + [[n_verts]])
+    fixed = to_fixed(offset_polygons(uv, np.concatenate(nxt), poly_start,
+                                     np.concatenate(expand)))
+    grey = np.rint(np.concatenate(greys)).astype(int).tolist()
+    bounds = poly_start.tolist()
+    for p in np.nonzero(np.concatenate(draw))[0].tolist():
+        cv2.fillConvexPoly(canvas, fixed[bounds[p]:bounds[p + 1]], grey[p], cv2.LINE_AA, SHIFT)
+    rect_fixed = to_fixed(_project(np.concatenate(rects), K) - shift)
+    for f, pts in zip(np.concatenate(rect_ids).tolist(), rect_fixed):
+        cv2.fillConvexPoly(ids, pts, f, cv2.LINE_8, SHIFT)
+    return (canvas, ids, _project(np.concatenate(p1s), K), _project(np.concatenate(p2s), K),
+            np.concatenate(faces_all), np.concatenate(body_edge).astype(np.int64))
 
 
 def render_sequence(n_boxes: int = 2, n_frames: int = 20, size: Tuple[int, int] = (640, 480),
@@ -292,8 +306,11 @@ def render_sequence(n_boxes: int = 2, n_frames: int = 20, size: Tuple[int, int] 
         if pinholes is not None:
             pinholes.append(warp.pinhole_crop(canvas).copy())
         if noise_sigma > 0:
-            noise = noise_rng.standard_normal(img.shape, dtype=np.float32)
-            noise *= np.float32(noise_sigma)
+            # OpenCV's (thread-local) generator is several times faster than numpy's here;
+            # it is reseeded from the sequence seed for every frame, so output is deterministic
+            noise = np.empty(img.shape, dtype=np.float32)
+            cv2.setRNGSeed(int(noise_rng.integers(1, 2 ** 31 - 1)))
+            cv2.randn(noise, 0.0, float(noise_sigma))
             img = cv2.add(img, noise, dtype=cv2.CV_8U)   # rounds and saturates
         else:
             img = np.ascontiguousarray(img)

@@ -239,7 +239,7 @@ def make_box(rng: np.random.Generator, half: np.ndarray, name: str) -> Body:
 
 def make_background(rng: np.random.Generator, K: np.ndarray,
                     canvas: Tuple[int, int, int, int], depth: float = 12.0) -> Body:
-    """Static wall at ``depth`` (slightly tilted) covering the canvas, with a grid of bands.
+    """Build a static wall at ``depth`` (slightly tilted) covering the canvas, with band grid.
 
     ``canvas = (u0, v0, width, height)`` in image pixels (the region that is rasterised).
     """
@@ -359,7 +359,7 @@ def place_boxes(rng: np.random.Generator, n_boxes: int, size: Tuple[int, int], K
 
 def _layout_ok(plans: List[Tuple[np.ndarray, np.ndarray, np.ndarray, float]],
                stamps: np.ndarray, K: np.ndarray, size: Tuple[int, int]) -> bool:
-    """True when every planned box stays in view and the boxes stay apart at every stamp.
+    """Check that every planned box stays in view and the boxes stay apart at every stamp.
 
     ``plans``: per box ``(centre0 (3,), pivot (3,), omega (3,) rad/s, radius)``.
     """

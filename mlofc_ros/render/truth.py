@@ -80,40 +80,37 @@ def visible_segments(p1: np.ndarray, p2: np.ndarray, faces: np.ndarray, id_buffe
     d = p2[idx] - p1[idx]
     a = p1[idx] + t0[idx, None] * d
     b = p1[idx] + t1[idx, None] * d
+    ab = b - a
     cnt = np.ceil(clip_len[idx] / STEP_PX).astype(np.int64) + 1
     start = np.concatenate([[0], np.cumsum(cnt)])
     owner = np.repeat(np.arange(len(idx)), cnt)
     k = np.arange(start[-1]) - start[owner]
-    s = k / (cnt[owner] - 1.0)
-    q = a[owner] + s[:, None] * (b - a)[owner]
-    unit = (b - a) / np.linalg.norm(b - a, axis=1)[:, None]
-    normal = np.stack([-unit[:, 1], unit[:, 0]], axis=1)[owner]
+    s = k / (cnt - 1.0)[owner]
+    # sample points in canvas pixels (+0.5 so that truncation rounds to the nearest pixel)
+    q = (a - [u0 - 0.5, v0 - 0.5])[owner] + s[:, None] * ab[owner]
+    side = SIDE_PX * np.stack([-ab[:, 1], ab[:, 0]], axis=1) / np.linalg.norm(ab, axis=1)[:, None]
+    side = side[owner]
     f1 = faces[idx, 0][owner]
     f2 = np.where(faces[idx, 1] >= 0, faces[idx, 1], -2)[owner]
     vis = np.zeros(len(q), dtype=bool)
-    for sign in (1.0, -1.0):
-        pr = q + sign * SIDE_PX * normal
-        col = np.clip(np.rint(pr[:, 0]).astype(np.int64) - u0, 0, wc - 1)
-        row = np.clip(np.rint(pr[:, 1]).astype(np.int64) - v0, 0, hc - 1)
+    for pr in (q + side, q - side):
+        col = np.clip(pr[:, 0], 0, wc - 1).astype(np.int64)
+        row = np.clip(pr[:, 1], 0, hc - 1).astype(np.int64)
         fid = id_buffer[row, col]
         vis |= (fid == f1) | (fid == f2)
     if dist is not None:
-        qd = distort_pixels(q, K, dist)
+        qd = distort_pixels(q + [u0 - 0.5, v0 - 0.5], K, dist)
         vis &= ((qd[:, 0] >= 0) & (qd[:, 0] <= width - 1)
                 & (qd[:, 1] >= 0) & (qd[:, 1] <= height - 1))
-    # runs of visible samples: run id increments at every visible sample that starts a run
+    # runs of visible samples, in sample order (and so grouped by edge)
     first = k == 0
     prev_vis = np.concatenate([[False], vis[:-1]]) & ~first
-    run_start = vis & ~prev_vis
-    run_id = np.cumsum(run_start) - 1
-    vis_idx = np.nonzero(vis)[0]
-    if len(vis_idx) == 0:
+    next_vis = np.concatenate([vis[1:], [False]]) & ~np.concatenate([first[1:], [True]])
+    run_first = np.nonzero(vis & ~prev_vis)[0]
+    run_last = np.nonzero(vis & ~next_vis)[0]
+    if len(run_first) == 0:
         return seg, frac, ok
-    rid = run_id[vis_idx]
-    n_runs = int(rid.max()) + 1
-    run_len = np.bincount(rid, minlength=n_runs)
-    run_first = np.full(n_runs, len(q), dtype=np.int64)
-    np.minimum.at(run_first, rid, vis_idx)
+    run_len = run_last - run_first + 1
     run_owner = owner[run_first]
     # longest run per edge: sort by (owner, -length) and take the first of each owner
     order = np.lexsort((-run_len, run_owner))
@@ -126,13 +123,13 @@ def visible_segments(p1: np.ndarray, p2: np.ndarray, faces: np.ndarray, id_buffe
     k_b = np.where(k_b >= last - SNAP_SAMPLES, last, k_b)
     sa = k_a / last
     sb = k_b / last
-    pa = a[e] + sa[:, None] * (b - a)[e]
-    pb = a[e] + sb[:, None] * (b - a)[e]
+    pa = np.clip(a[e] + sa[:, None] * ab[e], lo, hi)     # clip: rounding only
+    pb = np.clip(a[e] + sb[:, None] * ab[e], lo, hi)
     length = np.linalg.norm(pb - pa, axis=1)
     good = length >= MIN_LENGTH_PX
     rows = idx[e[good]]
     seg[rows] = np.concatenate([pa, pb], axis=1)[good]
-    n_vis = np.bincount(owner[vis_idx], minlength=len(idx))
+    n_vis = np.bincount(owner[vis], minlength=len(idx))
     frac_all = n_vis / cnt * clip_len[idx] / np.maximum(full_len[idx], 1e-12)
     frac[rows] = np.minimum(1.0, frac_all[e[good]])
     ok[rows] = True
