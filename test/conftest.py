@@ -18,6 +18,8 @@ import random
 
 os.environ.setdefault('HOME', '/tmp')
 os.environ.setdefault('MPLBACKEND', 'Agg')
+for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
+    os.environ.setdefault(_var, '1')   # as the node runs (mlofc_ros/__init__.py)
 if 'ROS_DOMAIN_ID' not in os.environ:
     # 1..100 stays inside the default DDS port range; random so parallel runs do not meet
     os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 100))

@@ -21,7 +21,7 @@ from .focal import first_order_focal, profile_cost, refine_focal
 from .gpca import algebraic_normals
 from .ksubspaces import assign, ksubspaces, total_cost
 from .lines import cayley_jacobian, cayley_to_rotvec, line_flows, LineFlows, rotvec_to_cayley
-from .models import fit_bodies, track_costs
+from .models import fit_bodies, fit_stats, quad_costs, track_costs, track_stats
 from .result import SegmentationResult
 from .robust import noise_sigma, robust_segmentation
 
@@ -94,36 +94,28 @@ def min_tracks_needed(n_bodies: int, n_frames: int, method: str, focal_known: bo
 
 def _solve_known_f(flows: LineFlows, tracks: np.ndarray, n: int, method: str,
                    rng: np.random.Generator, init_labels=None):
-    """Labels, Cayley vectors, costs (weighted) and info for one method at known f."""
-    info = {}
-    if n == 1:
-        labels = np.where(flows.pairs_per_track() > 0, 0, -1)
-        if method == 'robust':
-            return robust_segmentation(flows, tracks, 1, rng, init_labels=labels)
-        c, _ = fit_bodies(flows, labels, 1, weighted=False)
-        return labels, c, track_costs(flows, c, weighted=True), info
-    weighted = method == 'robust'
+    """Labels, Cayley vectors, exact weighted costs and info for one method at known f."""
     if method == 'robust':
         return robust_segmentation(flows, tracks, n, rng, init_labels=init_labels)
-    if method in ('algebraic', 'algebraic+kmeans'):
-        u = algebraic_normals(flows.rows.reshape(-1, 4), n)
-        c = u[:, :3]
-        labels = assign(track_costs(flows, c, weighted=False))
+    stats = track_stats(flows, weighted=False)          # the paper's methods are unweighted
+    if n == 1:
+        labels = np.where(stats.usable, 0, -1)
+        c, _ = fit_stats(stats, labels, 1)
+    elif method in ('algebraic', 'algebraic+kmeans'):
+        c = algebraic_normals(flows.rows.reshape(-1, 4), n)[:, :3]
+        labels = assign(quad_costs(stats, c))
         if method == 'algebraic+kmeans':
-            labels, c, _ = ksubspaces(flows, n, labels, weighted=False)
-    elif method == 'kmeans':
-        usable = flows.pairs_per_track() > 0
+            labels, c, _ = ksubspaces(stats, n, labels)
+    else:                                               # 'kmeans' from random labellings
         best = None
         for _ in range(KMEANS_RESTARTS):
-            start = np.where(usable, rng.integers(0, n, flows.n_tracks), -1)
-            lab, cc, costs = ksubspaces(flows, n, start, weighted=weighted)
+            start = np.where(stats.usable, rng.integers(0, n, flows.n_tracks), -1)
+            lab, cc, costs = ksubspaces(stats, n, start)
             score = total_cost(costs, lab)
             if best is None or score < best[0]:
                 best = (score, lab, cc)
         _, labels, c = best
-    else:
-        raise ValueError(f'unknown method {method!r}; choose from {METHODS}')
-    return labels, c, track_costs(flows, c, weighted=True), info
+    return labels, c, track_costs(flows, c, weighted=True), {}
 
 
 def _finish(flows: LineFlows, labels: np.ndarray, c: np.ndarray, costs: np.ndarray,
@@ -131,7 +123,7 @@ def _finish(flows: LineFlows, labels: np.ndarray, c: np.ndarray, costs: np.ndarr
     n = c.shape[0]
     dof = 2.0 * flows.pairs_per_track()
     sigma = info.get('sigma_px') or noise_sigma(costs, labels, dof)
-    _, inf_mat = fit_bodies(flows, labels, n, weighted=True, c0=c, iterations=1)
+    _, inf_mat = fit_bodies(flows, labels, n)
     counts = np.bincount(labels[labels >= 0], minlength=n)
     jac = cayley_jacobian(c)
     cov = np.full((n, 3, 3), np.inf)

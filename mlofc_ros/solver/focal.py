@@ -86,7 +86,7 @@ def profile_cost(tracks: np.ndarray, labels: np.ndarray, n: int, centre: Tuple[f
 
     def cost(f: float) -> float:
         flows = line_flows(tracks, (f, f, cx, cy))
-        c, _ = fit_bodies(flows, lab, n, weighted=True)
+        c, _ = fit_bodies(flows, lab, n)
         costs = track_costs(flows, c, weighted=True)
         ok = (lab >= 0) & np.isfinite(costs).all(axis=1)
         return float(np.sum(costs[np.flatnonzero(ok), lab[ok]]))

@@ -44,13 +44,16 @@ def multibody_vector(rows: np.ndarray, degree: int,
     null space is one-dimensional.
     """
     v = embed(rows, degree)
+    basis = None
     if relations is not None and relations.shape[1]:
         q, _ = np.linalg.qr(relations, mode='complete')
         basis = q[:, relations.shape[1]:]                    # orthonormal complement
-        _, _, vt = np.linalg.svd(v @ basis, full_matrices=False)
-        return basis @ vt[-1]
-    _, _, vt = np.linalg.svd(v, full_matrices=False)
-    return vt[-1]
+        v = v @ basis
+    # QR first: the SVD of the small triangular factor has the same right singular vectors
+    # and costs O(R M^2) instead of a full SVD of the tall matrix
+    r = np.linalg.qr(v, mode='r') if v.shape[0] > v.shape[1] else v
+    vec = np.linalg.svd(r)[2][-1]
+    return vec if basis is None else basis @ vec
 
 
 def recover_normals(rows: np.ndarray, coeffs: np.ndarray, degree: int, n: int,

@@ -16,8 +16,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from .lines import LineFlows
-from .models import fit_bodies, track_costs
+from .models import fit_stats, quad_costs, TrackStats
 
 
 def assign(costs: np.ndarray, threshold: Optional[np.ndarray] = None) -> np.ndarray:
@@ -50,21 +49,19 @@ def _reseed_empty(labels: np.ndarray, costs: np.ndarray, n: int, min_tracks: int
     return labels
 
 
-def ksubspaces(flows: LineFlows, n: int, labels: np.ndarray, weighted: bool,
-               max_iter: int = 100, c0: Optional[np.ndarray] = None,
+def ksubspaces(stats: TrackStats, n: int, labels: np.ndarray, max_iter: int = 100,
                threshold: Optional[np.ndarray] = None,
                min_tracks: int = 2) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Refine a labelling until it stops changing.
 
     Parameters
     ----------
-    flows : LineFlows
+    stats : TrackStats
+        Per-track normal equations, weighted (ours) or not (the paper's K-means).
     n : int
         Number of bodies.
     labels : (N,) int
         Initial labels (``-1`` = unused).
-    weighted : bool
-        Mahalanobis costs and fits (ours) or the paper's algebraic ones.
     threshold : (N,), optional
         Per-track outlier threshold on the cost: tracks above it get ``-1`` and do not move
         any body.
@@ -74,13 +71,13 @@ def ksubspaces(flows: LineFlows, n: int, labels: np.ndarray, weighted: bool,
     labels : (N,), c : (n, 3) Cayley vectors, costs : (N, n).
     """
     labels = np.asarray(labels, dtype=np.int64).copy()
-    c = c0
-    costs = None
+    c = costs = None
     for _ in range(max_iter):
-        c, _ = fit_bodies(flows, labels, n, weighted=weighted, c0=c)
-        costs = track_costs(flows, c, weighted)
+        c, _ = fit_stats(stats, labels, n)
+        costs = quad_costs(stats, c)
         new = assign(costs, threshold)
-        new = _reseed_empty(new, costs, n, min_tracks)
+        if threshold is None:
+            new = _reseed_empty(new, costs, n, min_tracks)
         if np.array_equal(new, labels):
             break
         labels = new

@@ -168,6 +168,7 @@ class LineFlows:
     E: np.ndarray            # (P, 3, 2) orthonormal pair orthogonal to m_bar
     M: np.ndarray            # (P, 2, 3)
     b: np.ndarray            # (P, 2)
+    W: np.ndarray            # (P, 2, 2) inverse residual covariance at c = 0 (1 px noise)
 
     @property
     def n_pairs(self) -> int:
@@ -186,7 +187,7 @@ class LineFlows:
         """Flows of the pairs selected by a boolean or index array (track indices unchanged)."""
         return LineFlows(self.n_tracks, self.pair_track[keep], self.m0[keep], self.m1[keep],
                          self.cov0[keep], self.cov1[keep], self.E[keep], self.M[keep],
-                         self.b[keep])
+                         self.b[keep], self.W[keep])
 
 
 def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
@@ -209,23 +210,28 @@ def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
     Et = np.swapaxes(E, -1, -2)
     M = -Et @ skew(mbar)
     b = np.einsum('pjk,pk->pj', Et, m1 - m0)
-    return LineFlows(tracks.shape[0], ti, m0, m1, cov[ti, ki], cov[ti, ki + 1], E, M, b)
+    cov0, cov1 = cov[ti, ki], cov[ti, ki + 1]
+    # residual weights at c = 0: the exact covariance depends on c only through
+    # (I +- [c]x/2), a few percent at several degrees per frame, so it is computed once
+    W = inv2(np.einsum('pij,pik,pkl->pjl', E, cov0 + cov1, E))
+    return LineFlows(tracks.shape[0], ti, m0, m1, cov0, cov1, E, M, b, W)
 
 
 def residual_covariance(flows: LineFlows, c: np.ndarray) -> np.ndarray:
     """Covariance ``(P, n, 2, 2)`` of ``r = E^T((I + [c]x/2) m - (I - [c]x/2) m')`` per body.
 
-    ``c`` is ``(n, 3)``; for 1 px endpoint noise. The residual's derivative with respect to
-    ``E`` vanishes at the solution, so ``E`` is treated as fixed.
+    ``c`` is ``(n, 3)`` (a few bodies); for 1 px endpoint noise. The residual's derivative with
+    respect to ``E`` vanishes at the solution, so ``E`` is treated as fixed.
     """
-    half = 0.5 * skew(c)                                   # (n, 3, 3)
-    a = np.eye(3) + half
-    bm = np.eye(3) - half
-    Et = np.swapaxes(flows.E, -1, -2)[:, None]             # (P, 1, 2, 3)
-    ea = Et @ a[None]                                      # (P, n, 2, 3)
-    eb = Et @ bm[None]
-    return (ea @ flows.cov0[:, None] @ np.swapaxes(ea, -1, -2)
-            + eb @ flows.cov1[:, None] @ np.swapaxes(eb, -1, -2))
+    c = np.atleast_2d(c)
+    Et = np.swapaxes(flows.E, -1, -2)                      # (P, 2, 3)
+    out = np.empty((flows.n_pairs, c.shape[0], 2, 2))
+    for i, half in enumerate(0.5 * skew(c)):               # loop over bodies, not lines
+        ea = Et + Et @ half                                # E^T (I + [c]x/2)
+        eb = Et - Et @ half
+        out[:, i] = (ea @ flows.cov0 @ np.swapaxes(ea, -1, -2)
+                     + eb @ flows.cov1 @ np.swapaxes(eb, -1, -2))
+    return out
 
 
 def inv2(s: np.ndarray) -> np.ndarray:

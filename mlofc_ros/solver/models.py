@@ -21,11 +21,68 @@ Two residuals exist side by side:
   covariance propagated from 1 px endpoint noise (short lines weigh less). Divided by the true
   endpoint variance it is chi-square with ``2 * pairs`` degrees of freedom.
 """
-from typing import Optional, Tuple
+from dataclasses import dataclass
+from typing import Tuple
 
 import numpy as np
 
-from .lines import inv2, LineFlows, residual_covariance
+from .lines import LineFlows
+
+
+@dataclass
+class TrackStats:
+    """Per-track normal equations: the cost of a track under any ``c`` is a quadratic form.
+
+    ``cost(c) = c^T A c - 2 g . c + k`` with ``A = sum M^T W M``, ``g = sum M^T W b``,
+    ``k = sum b^T W b`` over the track's frame pairs and ``W`` the inverse residual covariance
+    at ``c = 0`` (weighted) or the identity. Evaluating thousands of hypotheses, or refitting
+    bodies, then costs O(N) 3x3 operations instead of O(pairs) covariance propagations.
+    """
+
+    A: np.ndarray       # (N, 3, 3)
+    g: np.ndarray       # (N, 3)
+    k: np.ndarray       # (N,)
+    usable: np.ndarray  # (N,) bool: the track has at least one frame pair
+    weighted: bool
+
+
+def track_stats(flows: LineFlows, weighted: bool = True) -> TrackStats:
+    """Accumulate :class:`TrackStats` of every track (vectorised over pairs)."""
+    if weighted:
+        w = flows.W
+    else:
+        w = np.broadcast_to(np.eye(2), (flows.n_pairs, 2, 2))
+    mtw = np.swapaxes(flows.M, 1, 2) @ w
+    n = flows.n_tracks
+    A, g, k = np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros(n)
+    np.add.at(A, flows.pair_track, mtw @ flows.M)
+    np.add.at(g, flows.pair_track, np.einsum('pij,pj->pi', mtw, flows.b))
+    np.add.at(k, flows.pair_track, np.einsum('pi,pij,pj->p', flows.b, w, flows.b))
+    return TrackStats(A, g, k, flows.pairs_per_track() > 0, weighted)
+
+
+def quad_costs(stats: TrackStats, c: np.ndarray) -> np.ndarray:
+    """Costs ``(N, H)`` of every track under every Cayley vector ``c (H, 3)`` (nan: unusable).
+
+    Unweighted costs are divided by ``1 + |c|^2`` (distance to the hyperplane ``[c ; 1]``).
+    """
+    c = np.atleast_2d(c)
+    out = (np.einsum('hi,nij,hj->nh', c, stats.A, c) - 2.0 * (stats.g @ c.T)
+           + stats.k[:, None])
+    out = np.maximum(out, 0.0)
+    if not stats.weighted:
+        out /= 1.0 + np.sum(c * c, axis=1)[None, :]
+    out[~stats.usable] = np.nan
+    return out
+
+
+def fit_stats(stats: TrackStats, labels: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
+    """Least-squares ``c (n, 3)`` per body from its tracks' statistics; information (n, 3, 3)."""
+    use = (labels >= 0) & stats.usable
+    info, rhs = np.zeros((n, 3, 3)), np.zeros((n, 3))
+    np.add.at(info, labels[use], stats.A[use])
+    np.add.at(rhs, labels[use], stats.g[use])
+    return solve_normal_equations(info, rhs), info
 
 
 def pair_residuals(flows: LineFlows, c: np.ndarray) -> np.ndarray:
@@ -38,8 +95,7 @@ def pair_costs(flows: LineFlows, c: np.ndarray, weighted: bool = True) -> np.nda
     c = np.atleast_2d(np.asarray(c, dtype=float))
     r = pair_residuals(flows, c)
     if weighted:
-        w = inv2(residual_covariance(flows, c))
-        return np.einsum('pni,pnij,pnj->pn', r, w, r)
+        return np.einsum('pni,pij,pnj->pn', r, flows.W, r)
     return np.sum(r * r, axis=2) / (1.0 + np.sum(c * c, axis=1))[None, :]
 
 
@@ -55,57 +111,15 @@ def track_costs(flows: LineFlows, c: np.ndarray, weighted: bool = True) -> np.nd
     return out
 
 
-def fit_bodies(flows: LineFlows, track_labels: np.ndarray, n: int, weighted: bool = True,
-               c0: Optional[np.ndarray] = None, iterations: int = 2,
-               pair_weights: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
-    """Least-squares Cayley vector of every body from the tracks labelled with it.
+def fit_bodies(flows: LineFlows, track_labels: np.ndarray, n: int, weighted: bool = True
+               ) -> Tuple[np.ndarray, np.ndarray]:
+    """Least-squares Cayley vector ``(n, 3)`` of every body from the tracks labelled with it.
 
-    Parameters
-    ----------
-    flows : LineFlows
-    track_labels : (N,) int
-        Body of every track, ``-1`` = not used.
-    n : int
-        Number of bodies.
-    weighted : bool
-        Mahalanobis weights (re-linearised ``iterations`` times around the current ``c``) or
-        plain algebraic least squares.
-    c0 : (n, 3), optional
-        Starting point for the weights.
-    pair_weights : (P,), optional
-        Extra per-pair weights (e.g. robust IRLS weights).
-
-    Returns
-    -------
-    c : (n, 3)
-        Cayley vectors; zeros for a body without data.
-    info : (n, 3, 3)
-        Information matrices ``sum M^T W M`` (for 1 px noise when weighted); the covariance of
-        ``c`` is ``sigma^2 info^-1``.
+    Returns the Cayley vectors (zeros for a body without data) and the information matrices
+    ``(n, 3, 3)`` (``sum M^T W M``, for 1 px noise when weighted): the covariance of ``c`` is
+    ``sigma^2 info^-1``.
     """
-    labels = np.asarray(track_labels)[flows.pair_track]
-    use = labels >= 0
-    lab = labels[use]
-    M, b = flows.M[use], flows.b[use]
-    pw = None if pair_weights is None else np.asarray(pair_weights, dtype=float)[use]
-    c = np.zeros((n, 3)) if c0 is None else np.array(c0, dtype=float)
-    info = np.zeros((n, 3, 3))
-    sub = flows.subset(use) if weighted else None
-    for _ in range(max(1, iterations) if weighted else 1):
-        if weighted:
-            cov = residual_covariance(sub, c)                       # (P, n, 2, 2)
-            W = inv2(cov[np.arange(lab.size), lab])                 # (P, 2, 2)
-        else:
-            W = np.broadcast_to(np.eye(2), (lab.size, 2, 2))
-        if pw is not None:
-            W = W * pw[:, None, None]
-        mtw = np.swapaxes(M, 1, 2) @ W                              # (P, 3, 2)
-        info = np.zeros((n, 3, 3))
-        rhs = np.zeros((n, 3))
-        np.add.at(info, lab, mtw @ M)
-        np.add.at(rhs, lab, np.einsum('pij,pj->pi', mtw, b))
-        c = solve_normal_equations(info, rhs)
-    return c, info
+    return fit_stats(track_stats(flows, weighted), np.asarray(track_labels), n)
 
 
 def solve_normal_equations(info: np.ndarray, rhs: np.ndarray) -> np.ndarray:

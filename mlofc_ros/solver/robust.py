@@ -29,18 +29,18 @@ import numpy as np
 
 from .gpca import algebraic_normals
 from .ksubspaces import assign, ksubspaces, total_cost
-from .lines import inv2, LineFlows, residual_covariance
-from .models import chi2_quantile, solve_normal_equations, track_costs
+from .lines import LineFlows
+from .models import (chi2_quantile, fit_bodies, quad_costs, solve_normal_equations,
+                     track_costs, track_stats, TrackStats)
 
 #: Outlier level: a track is rejected when its cost exceeds this chi-square quantile.
 OUTLIER_P = 0.999
 
 
-def whitened_rows(flows: LineFlows) -> np.ndarray:
+def whitened_rows(flows: LineFlows, stats: TrackStats) -> np.ndarray:
     """Rows ``(2P, 4)`` multiplied by ``S^-1/2`` so every residual has unit variance (1 px)."""
-    s = residual_covariance(flows, np.zeros((1, 3)))[:, 0]          # (P, 2, 2)
-    val, vec = np.linalg.eigh(s)
-    inv_sqrt = vec @ (np.swapaxes(vec, 1, 2) / np.sqrt(np.maximum(val, 1e-300))[..., None])
+    val, vec = np.linalg.eigh(flows.W)                              # W = S^-1 at c = 0
+    inv_sqrt = vec @ (np.swapaxes(vec, 1, 2) * np.sqrt(np.maximum(val, 0.0))[..., None])
     return (inv_sqrt @ flows.rows).reshape(-1, 4)
 
 
@@ -74,38 +74,29 @@ def _sample_pairs(rng: np.random.Generator, pool: np.ndarray, mid: np.ndarray,
         near = np.argpartition(d, k, axis=1)[:, 1:k + 1]               # skip itself
         second[local] = pool[near[np.arange(near.shape[0]), rng.integers(0, k, near.shape[0])]]
     same = first == second
-    second[same] = rng.choice(pool, size=int(same.sum()))
+    second[same] = pool[(np.searchsorted(pool, first[same]) + 1) % pool.size]
     return np.stack([first, second], axis=1)
 
 
-def sequential_msac(flows: LineFlows, tracks: np.ndarray, n: int, sigma: float, dof: np.ndarray,
-                    rng: np.random.Generator, n_samples: int = 300) -> np.ndarray:
+def sequential_msac(stats: TrackStats, tracks: np.ndarray, n: int, cap: np.ndarray,
+                    rng: np.random.Generator, n_samples: int = 200) -> np.ndarray:
     """Labels from fitting one body at a time to the tracks not yet explained (MSAC)."""
-    usable = np.flatnonzero(dof > 0)
     mid = _midpoints(tracks)
-    # per-track normal equations (weights at c = 0) so a 2-track hypothesis is one 3x3 solve
-    s = residual_covariance(flows, np.zeros((1, 3)))[:, 0]
-    w = inv2(s)
-    mtw = np.swapaxes(flows.M, 1, 2) @ w
-    info = np.zeros((flows.n_tracks, 3, 3))
-    rhs = np.zeros((flows.n_tracks, 3))
-    np.add.at(info, flows.pair_track, mtw @ flows.M)
-    np.add.at(rhs, flows.pair_track, np.einsum('pij,pj->pi', mtw, flows.b))
-    cap = chi2_quantile(OUTLIER_P, dof) * sigma ** 2
-    labels = np.full(flows.n_tracks, -1, dtype=np.int64)
-    pool = usable
+    labels = np.full(stats.A.shape[0], -1, dtype=np.int64)
+    pool = np.flatnonzero(stats.usable)
     for body in range(n):
         if pool.size < 2:
             break
-        pairs = _sample_pairs(rng, pool, mid, n_samples)
-        hyp = solve_normal_equations(info[pairs[:, 0]] + info[pairs[:, 1]],
-                                     rhs[pairs[:, 0]] + rhs[pairs[:, 1]])
-        costs = track_costs(flows, hyp, weighted=True)[pool]          # (|pool|, H)
-        score = np.sum(np.minimum(costs, cap[pool, None]), axis=0)
-        best = int(np.argmin(score))
-        inl = pool[costs[:, best] < cap[pool]]
         if body == n - 1:
-            inl = pool
+            labels[pool] = body
+            break
+        pairs = _sample_pairs(rng, pool, mid, n_samples)
+        a = stats.A[pairs[:, 0]] + stats.A[pairs[:, 1]]
+        g = stats.g[pairs[:, 0]] + stats.g[pairs[:, 1]]
+        hyp = solve_normal_equations(a, g)                            # (H, 3)
+        costs = quad_costs(stats, hyp)[pool]                          # (|pool|, H)
+        score = np.sum(np.minimum(costs, cap[pool, None]), axis=0)
+        inl = pool[costs[:, int(np.argmin(score))] < cap[pool]]
         labels[inl] = body
         pool = np.setdiff1d(pool, inl)
     return labels
@@ -117,32 +108,44 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
                         ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """Best of several initialisations, weighted K-subspaces, outliers rejected.
 
-    Returns labels ``(N,)``, Cayley vectors ``(n, 3)``, costs ``(N, n)`` and diagnostics.
+    Returns labels ``(N,)``, Cayley vectors ``(n, 3)``, exact costs ``(N, n)`` and diagnostics.
     """
+    stats = track_stats(flows, weighted=True)
     dof = 2.0 * flows.pairs_per_track()
-    candidates = []
+    starts = []
     if init_labels is not None:
-        candidates.append(('previous', np.asarray(init_labels, dtype=np.int64)))
-    rows = flows.rows.reshape(-1, 4)
-    for name, r in (('gpca-weighted', whitened_rows(flows)), ('gpca', rows)):
-        try:
-            u = algebraic_normals(r, n)
-        except np.linalg.LinAlgError:
-            continue
-        candidates.append((name, assign(track_costs(flows, u[:, :3], weighted=True))))
-    refined = []
-    for name, lab in candidates:
-        lab, c, costs = ksubspaces(flows, n, lab, weighted=True)
-        refined.append((name, lab, c, costs))
+        starts.append(('previous', np.asarray(init_labels, dtype=np.int64)))
+    if n == 1:
+        starts.append(('all', np.where(stats.usable, 0, -1)))
+    else:
+        for name, rows in (('gpca-weighted', whitened_rows(flows, stats)),
+                           ('gpca', flows.rows.reshape(-1, 4))):
+            try:
+                u = algebraic_normals(rows, n)
+            except np.linalg.LinAlgError:
+                continue
+            if np.all(np.isfinite(u)):
+                starts.append((name, assign(quad_costs(stats, u[:, :3]))))
+    refined = [(name,) + ksubspaces(stats, n, lab) for name, lab in starts]
     if sigma is None:
-        sigma = min(noise_sigma(costs, lab, dof) for _, lab, _, costs in refined)
-    lab = sequential_msac(flows, tracks, n, sigma, dof, rng)
-    refined.append(('msac',) + ksubspaces(flows, n, lab, weighted=True))
+        # exact residuals (not the quadratic form) so that zero noise gives zero, not rounding
+        sigma = min(noise_sigma(track_costs(flows, c, weighted=True), lab, dof)
+                    for _, lab, c, _ in refined)
     cap = chi2_quantile(OUTLIER_P, dof) * sigma ** 2
+    if n > 1:
+        lab = sequential_msac(stats, tracks, n, cap, rng)
+        refined.append(('msac',) + ksubspaces(stats, n, lab))
     scores = [total_cost(costs, lab, cap) for _, lab, _, costs in refined]
-    name, lab, c, costs = refined[int(np.argmin(scores))]
-    # final pass with outlier rejection: outliers do not move any body
-    lab, c, costs = ksubspaces(flows, n, lab, weighted=True, c0=c, threshold=cap)
+    name, lab, c, _ = refined[int(np.argmin(scores))]
+    # final pass with exact costs and outlier rejection: outliers move no body
+    for _ in range(3):
+        costs = track_costs(flows, c, weighted=True)
+        new = assign(costs, cap)
+        c, _ = fit_bodies(flows, new, n)
+        if np.array_equal(new, lab):
+            break
+        lab = new
+    costs = track_costs(flows, c, weighted=True)
     info = {'sigma_px': sigma, 'candidate': name,
             'candidate_costs': dict(zip([r[0] for r in refined], scores))}
     return lab, c, costs, info
