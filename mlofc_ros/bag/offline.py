@@ -37,7 +37,7 @@ TWIST_TYPE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
 
 
 def output_topics(node_name: str = 'mlofc') -> Dict[str, str]:
-    """The node's output topic names under ``/<node_name>/`` (``body`` has a ``{i}`` slot)."""
+    """Return the node's output topic names under ``/<node_name>/`` (``body``: ``{i}`` slot)."""
     base = '/' + node_name.strip('/')
     return {'segments': f'{base}/segments', 'body': f'{base}/body_{{i}}/twist',
             'debug_image': f'{base}/debug_image'}

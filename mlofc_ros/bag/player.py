@@ -44,7 +44,7 @@ RELIABLE_DEPTH = 100
 
 
 def publisher_qos(msgtype: str, reliable: bool = False) -> QoSProfile:
-    """QoS of the publisher for ``msgtype``: sensor data for images unless ``reliable``."""
+    """Return the publisher QoS for ``msgtype``: sensor data for images unless ``reliable``."""
     if msgtype in SENSOR_TYPES and not reliable:
         return qos_profile_sensor_data
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RELIABLE_DEPTH,
@@ -134,11 +134,11 @@ class Player:
         stats = PlayStats({self.remap.get(t, t): 0 for t in self.publishers},
                           skipped_topics=list(self.skipped_topics))
         t_start = time.monotonic()
-        while rclpy.ok() and not should_stop():
+        while self.node.context.ok() and not should_stop():
             wall0 = time.monotonic()
             with BagReader(self.bag_path) as bag:
                 for msg in bag.messages(self.publishers):
-                    if not rclpy.ok() or should_stop():
+                    if not self.node.context.ok() or should_stop():
                         break
                     if rate > 0:
                         due = wall0 + (msg.timestamp_ns - self.start_ns) * 1e-9 / rate
@@ -176,7 +176,7 @@ class Player:
 
 
 def spinning_sleep(executor: Executor) -> Callable[[float], None]:
-    """A ``sleep(seconds)`` that spins ``executor`` meanwhile (for same-process subscribers)."""
+    """Return a ``sleep(seconds)`` that spins ``executor`` meanwhile (same-process subscribers)."""
     def sleep(seconds: float) -> None:
         deadline = time.monotonic() + seconds
         while (left := deadline - time.monotonic()) > 0:
