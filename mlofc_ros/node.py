@@ -1,0 +1,298 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""The ROS 2 node: a shell around :class:`mlofc_ros.pipeline.Pipeline`.
+
+Topics (relative names, remap as usual)::
+
+    sub  image               sensor_msgs/Image              sensor-data QoS (best effort)
+    sub  camera_info         sensor_msgs/CameraInfo         sensor-data QoS
+    pub  ~/segments          sensor_msgs/PointCloud2        one per processed image
+    pub  ~/body_<i>/twist    geometry_msgs/TwistWithCovarianceStamped, i = 0..num_bodies-1
+    pub  ~/debug_image       sensor_msgs/Image bgr8         if publish_debug_image or subscribed
+
+Every output carries the input image's header (stamp, camera optical frame). The subscription
+callback only queues the image (a bounded queue of ``queue_size`` frames that drops the stalest
+frame); a worker thread decodes, runs the pipeline and publishes, so the executor is never blocked
+by the solver and any executor (``rclpy.spin``, a MultiThreadedExecutor, ...) can host the node.
+Parameters: see :mod:`mlofc_ros.params` (``ros2 param describe /mlofc <name>``).
+
+Run: ``ros2 run mlofc_ros mlofc_node --ros-args -r image:=/cam/image_raw -p num_bodies:=3``.
+"""
+from collections import deque
+import threading
+import time
+from typing import Any, Deque, Dict, List, Optional, Tuple
+
+from geometry_msgs.msg import TwistWithCovarianceStamped
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from mlofc_ros import params as P
+from mlofc_ros.camera import CameraModel
+from mlofc_ros.image.encodings import image_msg_to_gray
+from mlofc_ros.messages.debug import draw_debug
+from mlofc_ros.pipeline import FrameResult, Pipeline
+from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
+                                    segments_msg, stamp_to_seconds, twist_msg)
+
+#: Reliable output QoS: keeps up to this many messages per topic for slow subscribers.
+OUTPUT_DEPTH = 10
+
+
+def parameter_descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
+    """ROS descriptor of a table entry (doubles use dynamic typing so ``:=1`` also works)."""
+    d = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
+    if spec.type is int and spec.range is not None:
+        d.integer_range = [IntegerRange(from_value=int(spec.range[0]),
+                                        to_value=int(spec.range[1]), step=1)]
+    elif spec.type is float:
+        d.dynamic_typing = True      # an integer override (-p x:=1) must not kill the node
+        if spec.range is not None:
+            d.floating_point_range = [FloatingPointRange(from_value=float(spec.range[0]),
+                                                         to_value=float(spec.range[1]),
+                                                         step=0.0)]
+        d.additional_constraints = 'double (integers are accepted and converted)'
+    choices = spec.allowed_choices()
+    if choices is not None:
+        d.additional_constraints = 'one of: ' + ', '.join(choices)
+    return d
+
+
+class MlofcNode(Node):
+    """Segment a camera stream into independently rotating rigid bodies (see module doc).
+
+    ``kwargs`` go to :class:`rclpy.node.Node` (namespace, parameter_overrides, context, ...).
+    """
+
+    def __init__(self, node_name: str = 'mlofc', **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        for spec in P.PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, parameter_descriptor(spec))
+        values = {name: P.coerce(name, self.get_parameter(name).value) for name in P.PARAMS}
+        self._values: Dict[str, Any] = values
+
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._queue: Deque[Tuple[Image, Optional[CameraModel], Optional[Tuple[int, int]]]] = \
+            deque()
+        self._pending: Dict[str, Any] = {}
+        self._camera: Optional[CameraModel] = None
+        self._camera_size: Optional[Tuple[int, int]] = None
+        self._last_warn: Dict[str, float] = {}
+        self.stats = {'received': 0, 'processed': 0, 'dropped': 0, 'skipped': 0, 'errors': 0}
+        self.last_result: Optional[FrameResult] = None
+
+        self._pipeline = Pipeline(**{k: values[k] for k in P.names('pipeline')})
+
+        out_qos = QoSProfile(depth=OUTPUT_DEPTH)
+        self._seg_pub = self.create_publisher(PointCloud2, '~/segments', out_qos)
+        self._debug_pub = self.create_publisher(Image, '~/debug_image', out_qos)
+        self._pub_lock = threading.Lock()
+        self._twist_pubs: List = []
+        self._make_twist_publishers(values['num_bodies'])
+
+        self.create_subscription(Image, 'image', self._on_image, qos_profile_sensor_data)
+        self.create_subscription(CameraInfo, 'camera_info', self._on_camera_info,
+                                 qos_profile_sensor_data)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+
+        self._stop = threading.Event()
+        self._worker = threading.Thread(target=self._run, name='mlofc_worker', daemon=True)
+        self._worker.start()
+        self.get_logger().info(
+            f'listening on {self.resolve_topic_name("image")} with '
+            f'num_bodies={values["num_bodies"]}, window={values["window"]}, '
+            f'method={values["method"]}')
+
+    # --- parameters ----------------------------------------------------------------------
+
+    def _validate_parameters(self, parameters: List[Parameter]) -> SetParametersResult:
+        """Accept or reject a parameter change with a readable reason (nothing changes here)."""
+        for p in parameters:
+            if p.name not in P.PARAMS:
+                continue                    # use_sim_time & co. belong to others
+            reason = P.validate(p.name, p.value)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters: List[Parameter]) -> None:
+        """Apply accepted changes: pipeline ones at the worker's next frame, the rest now."""
+        changed = {p.name: P.coerce(p.name, p.value) for p in parameters if p.name in P.PARAMS}
+        if not changed or not hasattr(self, '_worker'):
+            return                          # declaration time: the constructor reads values
+        with self._lock:
+            self._values.update(changed)
+            self._pending.update({k: v for k, v in changed.items()
+                                  if P.PARAMS[k].scope == 'pipeline'})
+            self._trim_queue()
+        if 'num_bodies' in changed:
+            self._make_twist_publishers(changed['num_bodies'])
+        self.get_logger().info('parameters set: ' +
+                               ', '.join(f'{k}={v!r}' for k, v in changed.items()))
+
+    def _make_twist_publishers(self, n: int) -> None:
+        """(Re)create ``~/body_<i>/twist`` for i < n (n = 0: created as bodies appear)."""
+        with self._pub_lock:
+            for pub in self._twist_pubs:
+                self.destroy_publisher(pub)
+            self._twist_pubs = []
+            self._grow_twist_publishers(n)
+
+    def _grow_twist_publishers(self, n: int) -> None:
+        while len(self._twist_pubs) < n:
+            self._twist_pubs.append(self.create_publisher(
+                TwistWithCovarianceStamped, f'~/body_{len(self._twist_pubs)}/twist',
+                QoSProfile(depth=OUTPUT_DEPTH)))
+
+    # --- input ---------------------------------------------------------------------------
+
+    def _trim_queue(self) -> None:
+        """Drop the stalest frames beyond ``queue_size`` (call with the lock held)."""
+        while len(self._queue) > self._values['queue_size']:
+            self._queue.popleft()
+            self.stats['dropped'] += 1
+
+    def _on_image(self, msg: Image) -> None:
+        with self._lock:
+            self.stats['received'] += 1
+            self._queue.append((msg, self._camera, self._camera_size))
+            self._trim_queue()
+            self._wake.notify()
+
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        try:
+            camera = camera_model_from_info(msg)
+        except ValueError as exc:
+            self._warn('camera_info', f'ignoring camera_info ({exc}); the focal length is '
+                       'estimated from the images')
+            camera = None
+        with self._lock:
+            self._camera = camera
+            self._camera_size = camera_info_size(msg) if camera is not None else None
+
+    def _warn(self, key: str, text: str) -> None:
+        """Log a warning, at most once per ``warn_period`` seconds per kind of problem."""
+        now = time.monotonic()
+        if now - self._last_warn.get(key, -1e300) >= self._values['warn_period']:
+            self._last_warn[key] = now
+            self.get_logger().warning(text)
+
+    # --- worker --------------------------------------------------------------------------
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with self._lock:
+                while not self._queue and not self._stop.is_set():
+                    self._wake.wait(0.2)
+                if self._stop.is_set():
+                    return
+                item = self._queue.popleft()
+                pending, self._pending = self._pending, {}
+                debug = self._values['publish_debug_image']
+            try:
+                if pending:
+                    self._pipeline.reconfigure(**pending)
+                self._process(*item, debug=debug)
+            except Exception as exc:  # noqa: B902 (the worker must survive anything)
+                self.stats['errors'] += 1
+                if self._stop.is_set() or not self.context.ok():
+                    return
+                self._warn('error', f'frame failed: {type(exc).__name__}: {exc}')
+
+    def _process(self, msg: Image, camera: Optional[CameraModel],
+                 camera_size: Optional[Tuple[int, int]], debug: bool) -> None:
+        try:
+            gray = image_msg_to_gray(msg, max_pixels=self._values['max_pixels'])
+        except ValueError as exc:
+            self.stats['skipped'] += 1
+            self._warn('image', f'bad image on {self.resolve_topic_name("image")}: {exc}; '
+                       'frame skipped')
+            return
+        size = (int(gray.shape[1]), int(gray.shape[0]))
+        if camera is not None and camera_size is not None and camera_size != size:
+            self._warn('camera_size', f'camera_info is for {camera_size[0]}x{camera_size[1]} '
+                       f'images but the image is {size[0]}x{size[1]}; ignoring camera_info')
+            camera = None
+        try:
+            result = self._pipeline.process(gray, stamp_to_seconds(msg.header.stamp), camera)
+        except ValueError as exc:
+            self.stats['skipped'] += 1
+            self._warn('input', f'{exc}; frame skipped')
+            return
+        if result.problem:
+            self._warn('pipeline', result.problem)
+        if result.skipped:
+            self.stats['skipped'] += 1
+            return
+        self._publish(msg, gray, result, debug)
+        self.last_result = result
+        self.stats['processed'] += 1
+
+    def _publish(self, msg: Image, gray: Any, r: FrameResult, debug: bool) -> None:
+        header = msg.header
+        self._seg_pub.publish(segments_msg(header, r.segments, r.track_ids, r.labels,
+                                           r.residuals))
+        with self._pub_lock:
+            if self._values['num_bodies'] == 0:
+                self._grow_twist_publishers(len(r.angular_velocities))
+            for i, pub in enumerate(self._twist_pubs):
+                if i < len(r.body_valid) and r.body_valid[i]:
+                    pub.publish(twist_msg(header, r.angular_velocities[i],
+                                          r.angular_covariances[i]))
+        if debug or self._debug_pub.get_subscription_count() > 0:
+            bgr = draw_debug(gray, r.segments, r.labels, r.track_ids, r.angular_velocities,
+                             r.body_valid)
+            self._debug_pub.publish(debug_image_msg(header, bgr))
+
+    # --- lifecycle -----------------------------------------------------------------------
+
+    def pending_frames(self) -> int:
+        """Frames waiting in the queue."""
+        with self._lock:
+            return len(self._queue)
+
+    def destroy_node(self) -> None:
+        """Stop the worker, then destroy the node."""
+        self._stop.set()
+        with self._lock:
+            self._wake.notify_all()
+        if self._worker.is_alive() and threading.current_thread() is not self._worker:
+            self._worker.join(timeout=10.0)
+        super().destroy_node()
+
+
+def main(args: Optional[List[str]] = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = MlofcNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

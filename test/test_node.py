@@ -1,0 +1,330 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The node over real DDS: in-process next to a test node, and as the installed executable."""
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import threading
+import time
+from types import SimpleNamespace
+from typing import Callable, Dict, List
+
+from geometry_msgs.msg import TwistWithCovarianceStamped
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.srv import GetParameters, SetParameters
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from test_pipeline import (evaluate, GOAL_MISCLASSIFIED, GOAL_OMEGA_ERROR, small_sequence,
+                           two_box_sequence)
+
+from mlofc_ros import params as P
+from mlofc_ros.image.encodings import gray_to_image_fields
+from mlofc_ros.messages.segments import SEGMENT_FIELDS
+from mlofc_ros.node import MlofcNode, parameter_descriptor
+from mlofc_ros.ros_messages import (LINEAR_UNKNOWN_VARIANCE, parse_segments_msg,
+                                    parse_twist_msg, stamp_to_seconds)
+
+
+pytestmark = pytest.mark.ros
+
+EXECUTABLE = pathlib.Path(sys.executable).parent / 'mlofc_node'
+FRAME_ID = 'camera_optical_frame'
+
+
+@pytest.fixture(scope='module')
+def ros():
+    rclpy.init()
+    yield
+    rclpy.try_shutdown()
+
+
+def image_msg(gray: np.ndarray, t: float) -> Image:
+    msg = Image()
+    for key, value in gray_to_image_fields(gray, 'mono8').items():
+        setattr(msg, key, value)
+    msg.header.stamp.sec = int(t)
+    msg.header.stamp.nanosec = int(round((t - int(t)) * 1e9))
+    msg.header.frame_id = FRAME_ID
+    return msg
+
+
+def camera_info_msg(camera, size, t: float = 0.0) -> CameraInfo:
+    msg = CameraInfo()
+    msg.header = image_msg(np.zeros((2, 2), np.uint8), t).header
+    msg.width, msg.height = size
+    msg.k = [camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]
+    msg.d = list(camera.d)
+    msg.distortion_model = camera.distortion_model
+    return msg
+
+
+class Harness:
+    """A test node and an executor spinning in a thread (with the node under test, if any)."""
+
+    def __init__(self, *nodes) -> None:
+        self.node = rclpy.create_node('mlofc_test_harness')
+        self.executor = SingleThreadedExecutor()
+        for n in (self.node,) + nodes:
+            self.executor.add_node(n)
+        self.lock = threading.Lock()
+        self.inbox: Dict[str, List] = {}
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def collect(self, msg_type, topic: str, qos=None) -> List:
+        box = self.inbox.setdefault(topic, [])
+
+        def cb(msg):
+            with self.lock:
+                box.append(msg)
+        self.node.create_subscription(msg_type, topic, cb, qos or QoSProfile(depth=100))
+        return box
+
+    def wait(self, pred: Callable[[], bool], timeout: float = 10.0) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if pred():
+                return True
+            time.sleep(0.01)
+        return pred()
+
+    def call(self, srv_type, name: str, request, timeout: float = 10.0):
+        client = self.node.create_client(srv_type, name)
+        assert client.wait_for_service(timeout_sec=timeout), f'no service {name}'
+        future = client.call_async(request)
+        assert self.wait(future.done, timeout), f'{name} did not answer'
+        self.node.destroy_client(client)
+        return future.result()
+
+    def set_params(self, node_name: str, **values):
+        req = SetParameters.Request()
+        req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
+        return self.call(SetParameters, f'{node_name}/set_parameters', req).results
+
+    def get_params(self, node_name: str, *names):
+        req = GetParameters.Request()
+        req.names = list(names)
+        values = self.call(GetParameters, f'{node_name}/get_parameters', req).values
+        return [Parameter.from_parameter_msg(ParameterMsg(name=n, value=v)).value
+                for n, v in zip(names, values)]
+
+    def topics(self) -> Dict[str, List[str]]:
+        return dict(self.node.get_topic_names_and_types())
+
+    def close(self, *nodes) -> None:
+        self.executor.shutdown()
+        self.thread.join(timeout=10)
+        for n in nodes:
+            n.destroy_node()
+        self.node.destroy_node()
+
+
+def stamp_of(msg) -> float:
+    return round(stamp_to_seconds(msg.header.stamp), 6)
+
+
+def send_frames(h: Harness, pub, frames, stamps, clouds: List, cam_pub=None, cam=None,
+                timeout: float = 20.0) -> None:
+    """Publish frames one at a time, each after the previous one's cloud arrived."""
+    for img, t in zip(frames, stamps):
+        if cam_pub is not None:
+            cam_pub.publish(camera_info_msg(cam, (img.shape[1], img.shape[0]), t))
+        n = len(clouds)
+        msg = image_msg(img, t)
+        for _ in range(3):            # best effort: resend if this frame never got through
+            pub.publish(msg)
+            if h.wait(lambda: len(clouds) > n, timeout / 3):
+                break
+        assert len(clouds) > n, f'no ~/segments for the frame at {t:.3f} s'
+        assert stamp_of(clouds[-1]) == round(t, 6)
+
+
+# --- in process --------------------------------------------------------------------------
+
+
+def test_descriptors_match_the_parameter_table():
+    for spec in P.PARAMETERS:
+        d = parameter_descriptor(spec)
+        assert d.description == spec.description
+        if spec.type is int and spec.range is not None:
+            assert (d.integer_range[0].from_value, d.integer_range[0].to_value) == spec.range
+        if spec.type is float:
+            assert d.dynamic_typing and d.floating_point_range[0].to_value == spec.range[1]
+
+
+@pytest.mark.slow
+def test_in_process_two_boxes_one_cloud_per_image_and_accuracy(ros):
+    seq = two_box_sequence()
+    node = MlofcNode(namespace='/inproc', parameter_overrides=[
+        Parameter('num_bodies', value=3), Parameter('publish_debug_image', value=True)])
+    h = Harness(node)
+    try:
+        clouds = h.collect(PointCloud2, '/inproc/mlofc/segments')
+        twists = {i: h.collect(TwistWithCovarianceStamped, f'/inproc/mlofc/body_{i}/twist')
+                  for i in range(3)}
+        debug = h.collect(Image, '/inproc/mlofc/debug_image')
+        pub = h.node.create_publisher(Image, '/inproc/image', qos_profile_sensor_data)
+        cam_pub = h.node.create_publisher(CameraInfo, '/inproc/camera_info',
+                                          qos_profile_sensor_data)
+        assert h.wait(lambda: pub.get_subscription_count() == 1
+                      and cam_pub.get_subscription_count() == 1
+                      and h.node.count_publishers('/inproc/mlofc/segments') == 1)
+        send_frames(h, pub, seq.frames, seq.stamps, clouds, cam_pub, seq.camera)
+        h.wait(lambda: len(debug) >= len(seq.frames)
+               and all(len(t) >= len(seq.frames) - 1 for t in twists.values()), 5.0)
+        # exactly one cloud per processed image, in order, with the image's header
+        assert node.stats['processed'] == len(seq.frames) == len(clouds)
+        assert [stamp_of(c) for c in clouds] == [round(t, 6) for t in seq.stamps]
+        assert all(c.header.frame_id == FRAME_ID for c in clouds)
+        c = clouds[-1]
+        assert [(f.name, f.offset, f.datatype, f.count) for f in c.fields] == \
+            [tuple(x) for x in SEGMENT_FIELDS]
+        assert c.point_step == 28 and c.height == 1 and not c.is_bigendian
+        assert c.row_step == 28 * c.width and len(c.data) == c.row_step and c.width > 50
+        # twists: rad/s in the image frame, linear marked unknown
+        tw = twists[0][-1]
+        assert tw.header.frame_id == FRAME_ID and stamp_of(tw) == stamp_of(c)
+        cov = np.asarray(tw.twist.covariance).reshape(6, 6)
+        assert np.allclose(np.diag(cov)[:3], LINEAR_UNKNOWN_VARIANCE)
+        assert np.all(np.isfinite(cov[3:, 3:])) and np.all(np.diag(cov)[3:] > 0)
+        assert debug and debug[-1].encoding == 'bgr8' and debug[-1].width == 640
+        # accuracy through DDS, scored like the pipeline test
+        by_stamp = {i: {stamp_of(m): parse_twist_msg(m)[0] for m in twists[i]} for i in twists}
+        results = []
+        for cloud in clouds:
+            segs, ids, labels, _ = parse_segments_msg(cloud)
+            t = stamp_of(cloud)
+            w = np.array([by_stamp[i].get(t, np.full(3, np.nan)) for i in range(3)])
+            results.append(SimpleNamespace(segments=segs, labels=labels.astype(int),
+                                           angular_velocities=w))
+        ev = evaluate(results, seq, first_frame=4)
+        print('node (in process), two boxes + wall, window full:',
+              {k: round(v, 4) for k, v in ev.items()})
+        assert ev['wrong'] <= GOAL_MISCLASSIFIED, ev
+        assert ev['omega_error'] <= GOAL_OMEGA_ERROR, ev
+        assert ev['unassigned'] < 0.35, ev
+    finally:
+        h.close(node)
+
+
+def test_in_process_bad_input_queue_drops_and_parameter_changes(ros):
+    seq = small_sequence()
+    node = MlofcNode(namespace='/robust', parameter_overrides=[
+        Parameter('queue_size', value=1), Parameter('warn_period', value=0.0)])
+    h = Harness(node)
+    try:
+        clouds = h.collect(PointCloud2, '/robust/mlofc/segments')
+        pub = h.node.create_publisher(Image, '/robust/image', qos_profile_sensor_data)
+        cam_pub = h.node.create_publisher(CameraInfo, '/robust/camera_info',
+                                          qos_profile_sensor_data)
+        assert h.wait(lambda: pub.get_subscription_count() == 1
+                      and cam_pub.get_subscription_count() == 1
+                      and h.node.count_publishers('/robust/mlofc/segments') == 1)
+        # a bad image: warned about and skipped, the node keeps going
+        bad = image_msg(seq.frames[0], 0.0)
+        bad.encoding = 'no_such_encoding'
+        pub.publish(bad)
+        assert h.wait(lambda: node.stats['skipped'] >= 1)
+        # an uncalibrated camera_info (K all zero): ignored, the focal length is estimated
+        zero = camera_info_msg(seq.camera, (320, 240))
+        zero.k = [0.0] * 9
+        cam_pub.publish(zero)
+        send_frames(h, pub, seq.frames[:3], seq.stamps[:3], clouds)
+        assert node.stats['processed'] == 3 and len(clouds) == 3
+        # a burst: the queue (size 1) drops the stalest frames, the newest is always processed
+        burst = [seq.stamps[3] + k / 30.0 for k in range(12)]
+        for k, t in enumerate(burst):
+            pub.publish(image_msg(seq.frames[3 + k % 5], t))
+        assert h.wait(lambda: node.pending_frames() == 0 and stamp_of(clouds[-1]) ==
+                      round(burst[-1], 6), 20.0)
+        time.sleep(0.2)
+        s = node.stats
+        assert s['processed'] + s['dropped'] + s['skipped'] == s['received']
+        assert len(clouds) == s['processed']
+        assert len({stamp_of(c) for c in clouds}) == len(clouds)
+        print('burst of 12 frames:', s)
+        # run-time parameters through the parameter services
+        ok = h.set_params('/robust/mlofc', num_bodies=3, window=4, min_segment_length=25)
+        assert all(r.successful for r in ok), [r.reason for r in ok]
+        assert h.wait(lambda: '/robust/mlofc/body_2/twist' in h.topics())
+        for name, value, word in (('window', 1, 'window'), ('method', 'nope', 'nope'),
+                                  ('focal_length', 'x', 'double'), ('queue_size', 0, '1')):
+            res = h.set_params('/robust/mlofc', **{name: value})[0]
+            assert not res.successful and word in res.reason, res.reason
+        assert h.get_params('/robust/mlofc', 'window', 'method', 'num_bodies') == \
+            [4, 'robust', 3]
+        n = len(clouds)
+        send_frames(h, pub, seq.frames[5:7], [10.0, 10.0 + 1 / 30], clouds)
+        assert len(clouds) == n + 2
+        assert node.count_publishers('/robust/mlofc/body_2/twist') == 1
+    finally:
+        h.close(node)
+
+
+# --- the installed executable --------------------------------------------------------------
+
+
+def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
+    assert EXECUTABLE.exists(), f'{EXECUTABLE} missing: pip install -e .'
+    env = dict(os.environ, HOME=os.environ.get('HOME', '/tmp'), PYTHONUNBUFFERED='1')
+    proc = subprocess.Popen(
+        [str(EXECUTABLE), '--ros-args', '-r', 'image:=/cam/image_raw',
+         '-r', 'camera_info:=/cam/camera_info', '-p', 'num_bodies:=3',
+         '-p', 'focal_length:=300', '-p', 'window:=3'],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    h = Harness()
+    try:
+        clouds = h.collect(PointCloud2, '/mlofc/segments')
+        pub = h.node.create_publisher(Image, '/cam/image_raw', qos_profile_sensor_data)
+        assert h.wait(lambda: pub.get_subscription_count() == 1
+                      and h.node.count_publishers('/mlofc/segments') == 1, 30.0), \
+            'node did not come up'
+        topics = h.topics()
+        for i in range(3):
+            assert f'/mlofc/body_{i}/twist' in topics
+        assert '/mlofc/body_3/twist' not in topics and '/image' not in topics
+        assert h.node.count_subscribers('/cam/camera_info') == 1
+        # -p focal_length:=300 (an integer) was accepted for the double
+        assert h.get_params('/mlofc', 'focal_length', 'num_bodies', 'window') == [300, 3, 3]
+        seq = small_sequence()
+        send_frames(h, pub, seq.frames[:4], seq.stamps[:4], clouds)
+        assert len(clouds) == 4
+        assert clouds[-1].header.frame_id == FRAME_ID
+        _, _, labels, _ = parse_segments_msg(clouds[-1])
+        assert labels.max() >= 0
+        res = h.set_params('/mlofc', window=1)[0]
+        assert not res.successful and 'window' in res.reason
+        res = h.set_params('/mlofc', focal_length=320, num_bodies=2)
+        assert all(r.successful for r in res)
+        assert h.get_params('/mlofc', 'window', 'focal_length') == [3, 320]
+        assert h.wait(lambda: '/mlofc/body_2/twist' not in h.topics())
+        send_frames(h, pub, seq.frames[4:6], seq.stamps[4:6], clouds)
+    finally:
+        h.close()
+        proc.send_signal(signal.SIGINT)
+        try:
+            out, _ = proc.communicate(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, _ = proc.communicate()
+    assert proc.returncode == 0, out
+    assert 'Traceback' not in out, out
