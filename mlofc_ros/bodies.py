@@ -198,5 +198,5 @@ class BodyTracker:
         self.n_slots = max(self.n_slots, int(mapping.max()) + 1)
 
     def state(self) -> Tuple[int, Dict[int, np.ndarray]]:
-        """``(number of stable ids so far, {stable id: last angular velocity})``."""
+        """Return ``(number of stable ids so far, {stable id: last angular velocity})``."""
         return self.n_slots, {k: v.copy() for k, v in self._omegas.items()}

@@ -82,7 +82,7 @@ class ParamSpec:
     scope: str = 'pipeline'
 
     def allowed_choices(self) -> Optional[Tuple[str, ...]]:
-        """Allowed strings, or None when any string is allowed."""
+        """Return the allowed strings, or None when any string is allowed."""
         if self.name == 'method':
             return solver_methods()
         return self.choices
@@ -200,7 +200,7 @@ def check_all(values: Mapping[str, Any]) -> Dict[str, Any]:
 
 
 def names(scope: Optional[str] = None) -> Iterable[str]:
-    """Parameter names (of ``scope`` when given) in table order."""
+    """Return the parameter names in table order (only those of ``scope`` when given)."""
     return [p.name for p in PARAMETERS if scope is None or p.scope == scope]
 
 
