@@ -313,9 +313,24 @@ def run_node(bag_path: Path, cfg: DemoConfig, workdir: Path,
              log: Any = sys.stdout) -> Collected:
     """Start the node, play ``bag_path`` into it in lock-step, collect its outputs."""
     domain = cfg.domain_id if cfg.domain_id is not None else fresh_domain_id()
-    os.environ['ROS_DOMAIN_ID'] = str(domain)
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    os.environ.setdefault('HOME', tempfile.gettempdir())
+    overrides = {'ROS_DOMAIN_ID': str(domain),
+                 'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get(
+                     'ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST'),
+                 'HOME': os.environ.get('HOME', tempfile.gettempdir())}
+    saved = {k: os.environ.get(k) for k in overrides}
+    os.environ.update(overrides)   # this process's rmw reads them too; restored on return
+    try:
+        return _run_node(bag_path, cfg, workdir, domain, log)
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _run_node(bag_path: Path, cfg: DemoConfig, workdir: Path, domain: int,
+              log: Any) -> Collected:
     env = dict(os.environ, PYTHONUNBUFFERED='1')
 
     import rclpy
@@ -346,7 +361,7 @@ def run_node(bag_path: Path, cfg: DemoConfig, workdir: Path,
     sent_at: Dict[int, float] = {}
 
     context = rclpy.Context()
-    rclpy.init(context=context)
+    rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('mlofc_demo', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -583,6 +598,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--keep-bag', action='store_true', help='keep the bag and node log in --out')
     p.add_argument('--frame-timeout', type=float, default=30.0,
                    help='seconds to wait for the node to answer a frame (default 30)')
+    p.add_argument('--startup-timeout', type=float, default=60.0,
+                   help='seconds to wait for the node to subscribe (default 60)')
     p.add_argument('--domain-id', type=int, help='ROS domain id (default: a random fresh one)')
     return p
 
@@ -596,7 +613,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     cfg = DemoConfig(frames=args.frames, boxes=args.boxes, size=args.size, seed=args.seed,
                      method=args.method, window=args.window, frame_timeout=args.frame_timeout,
-                     domain_id=args.domain_id)
+                     startup_timeout=args.startup_timeout, domain_id=args.domain_id)
     out_dir = args.out if args.out is not None else default_out_dir()
     t_start = time.monotonic()
     try:

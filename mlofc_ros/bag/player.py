@@ -32,7 +32,6 @@ from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import (HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy)
-from rclpy.utilities import remove_ros_args
 
 from mlofc_ros.bag.bagfile import BagError, BagMessage, BagReader, IMAGE_TYPE, message_class
 
@@ -243,8 +242,11 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Entry point of ``mlofc_play``; returns the exit code (1 on a user error)."""
-    all_args = list(sys.argv if argv is None else ['mlofc_play', *argv])
-    args = _parser().parse_args(remove_ros_args(all_args)[1:])
+    argv = list(sys.argv[1:] if argv is None else argv)
+    # only what follows --ros-args goes to rcl: ``--remap a:=b`` must not become a global remap
+    split = argv.index('--ros-args') if '--ros-args' in argv else len(argv)
+    args = _parser().parse_args(argv[:split])
+    ros_args = ['mlofc_play', *argv[split:]]
     try:
         remap = parse_remaps(args.remap)
     except ValueError as exc:
@@ -253,7 +255,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.rate < 0:
         print(f'mlofc_play: --rate must be >= 0, got {args.rate}', file=sys.stderr)
         return 2
-    rclpy.init(args=all_args)
+    rclpy.init(args=ros_args)
     node = rclpy.create_node('mlofc_play')
     try:
         stats = play(args.bag, args.rate, node=node, topics=args.topics, remap=remap,

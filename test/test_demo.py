@@ -1,0 +1,73 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The demo: scoring helpers, a short run with the node as a subprocess, a clean failure."""
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from mlofc_ros import demo
+
+
+def test_match_segments_accepts_parts_of_edges():
+    truth = np.array([[0.0, 0.0, 100.0, 0.0], [0.0, 50.0, 0.0, 150.0]])
+    det = np.array([[10.0, 1.0, 60.0, -1.0],      # part of edge 0
+                    [-1.0, 60.0, 1.5, 140.0],     # part of edge 1
+                    [10.0, 20.0, 60.0, 20.0],     # parallel, 20 px off: no edge
+                    [120.0, 0.0, 150.0, 0.0]])    # beyond the end of edge 0
+    np.testing.assert_array_equal(demo.match_segments(det, truth), [0, 1, -1, -1])
+    assert demo.match_segments(np.zeros((0, 4)), truth).shape == (0,)
+    np.testing.assert_array_equal(demo.match_segments(det, np.zeros((0, 4))), [-1] * 4)
+
+
+def test_match_bodies_maximises_overlap():
+    conf = np.array([[0, 40, 2], [30, 0, 1], [1, 3, 25]])
+    assert demo.match_bodies(conf) == {0: 1, 1: 0, 2: 2}
+    # more node labels than true bodies: the weakest label stays unmatched
+    conf = np.array([[5, 0], [0, 7], [1, 2]])
+    assert demo.match_bodies(conf) == {0: 0, 1: 1}
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_demo_runs_the_node_as_a_subprocess(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, '-m', 'mlofc_ros.demo', '--frames', '20', '--out', str(tmp_path)],
+        capture_output=True, text=True, timeout=150)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    out = proc.stdout
+    assert 'node: 20/20 frames answered' in out, out
+    for body in ('background', 'box0', 'box1'):
+        assert re.search(rf'^{body}\s+\d+\s+\(', out, re.M), out
+    accuracy = float(re.search(r'label accuracy ([\d.]+) %', out).group(1))
+    assert accuracy > 80.0, out
+    assert (tmp_path / 'demo_strip.png').stat().st_size > 10_000
+    report = (tmp_path / 'demo.md').read_text()
+    assert 'label accuracy' in report and '![segments coloured by body](demo_strip.png)' in report
+
+
+@pytest.mark.ros
+def test_demo_fails_cleanly_when_the_node_does_not_answer(tmp_path, monkeypatch, capsys):
+    # a "node" that never subscribes to anything
+    monkeypatch.setattr(demo, 'node_command',
+                        lambda: [sys.executable, '-c', 'import time; time.sleep(30)'])
+    rc = demo.main(['--frames', '3', '--size', '64x48', '--out', str(tmp_path),
+                    '--startup-timeout', '2'])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert 'did not come up' in err and 'Traceback' not in err
+    assert not (tmp_path / 'demo.md').exists()
