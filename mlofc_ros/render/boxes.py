@@ -252,6 +252,13 @@ def render_sequence(n_boxes: int = 2, n_frames: int = 20, size: Tuple[int, int] 
       distortion: plumb_bob ``(k1, k2, p1, p2, k3)``; frames then show the distortion
         (rendered as pinhole, warped with ``cv2.remap``) and ``camera.d`` carries it.
 
+    The scene is planned over the whole sequence: for ``'camera_centre'`` the boxes' mid-sequence
+    positions are laid out and each rotation axis is drawn in a cone about the box's line of
+    sight that is narrow enough to keep the box in view and apart from the others (for long or
+    fast sequences the boxes mostly spin about their line of sight), so the same seed with
+    another ``n_frames`` gives another scene.  Noise comes from OpenCV's generator, reseeded
+    from ``seed`` for every frame (this resets the calling thread's ``cv2.theRNG``).
+
     Raises ``ValueError`` naming a bad argument.
     """
     if not 1 <= int(n_boxes) <= 4:

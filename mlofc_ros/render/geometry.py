@@ -33,6 +33,20 @@ def so3_exp(rotvec: Sequence[float]) -> np.ndarray:
     return np.eye(3) + a * wx + b * (wx @ wx)
 
 
+def so3_exp_many(rotvecs: np.ndarray) -> np.ndarray:
+    """Vectorised :func:`so3_exp`: rotation vectors (N, 3) rad -> rotation matrices (N, 3, 3)."""
+    w = np.asarray(rotvecs, dtype=float).reshape(-1, 3)
+    theta = np.linalg.norm(w, axis=1)
+    small = theta < 1e-12
+    th = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0, np.sin(th) / th)
+    b = np.where(small, 0.5, (1.0 - np.cos(th)) / th ** 2)
+    wx = np.zeros((len(w), 3, 3))
+    wx[:, 0, 1], wx[:, 0, 2], wx[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    wx[:, 1, 0], wx[:, 2, 0], wx[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
+    return np.eye(3) + a[:, None, None] * wx + b[:, None, None] * (wx @ wx)
+
+
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """Uniformly distributed rotation matrix (3, 3) drawn from ``rng`` (unit quaternion)."""
     q = rng.standard_normal(4)

@@ -28,8 +28,9 @@ _AA_DILATION = np.array([
     0.725, 0.694, 0.691, 0.691, 0.690, 0.690, 0.686, 0.684, 0.680, 0.678, 0.669, 0.665,
     0.661, 0.652, 0.647, 0.636, 0.626, 0.618, 0.600])
 _AA_ANGLES = np.linspace(0.0, 45.0, len(_AA_DILATION))
-#: How far (px) an edge overpainted by a later polygon is pushed outward.
-EXPAND_PX = 1.0
+#: How far (px) an edge overpainted by a later polygon is pushed outward (0: left as given,
+#: its AA dilation then reaches under the later polygon without spikes at silhouette corners).
+EXPAND_PX = 0.0
 #: Largest vertex displacement (px) allowed by the offset (miter limit for sharp corners).
 MAX_SHIFT_PX = 3.0
 

@@ -26,7 +26,8 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from mlofc_ros.render.geometry import clip_convex_polygon, random_rotation, so3_exp
+from mlofc_ros.render.geometry import (clip_convex_polygon, random_rotation, so3_exp,
+                                       so3_exp_many)
 
 #: Multipliers of a face's albedo: plain face, band of direction 1, direction 2, crossing.
 BOX_PATTERN = (1.0, 0.3, 0.6, 0.12)
@@ -323,7 +324,7 @@ def place_boxes(rng: np.random.Generator, n_boxes: int, size: Tuple[int, int], K
             jit = 0.0 if final else 0.08
             u = uc + rng.uniform(-jit, jit) * cw
             v = vc + rng.uniform(-jit, jit) * ch
-            r_px = rng.uniform(0.32, 0.4) * min(cw, ch)
+            r_px = rng.uniform(0.36, 0.46) * min(cw, ch)
             z = rng.uniform(4.0, 8.0)
             c_mid = z * (kinv @ np.array([u, v, 1.0]))
             speed = rng.uniform(lo, hi)
@@ -368,13 +369,13 @@ def _layout_ok(plans: List[Tuple[np.ndarray, np.ndarray, np.ndarray, float]],
     cen = np.empty((len(plans), len(stamps), 2))
     rad = np.empty((len(plans), len(stamps)))
     for b, (centre0, pivot, omega, radius) in enumerate(plans):
-        for i, t in enumerate(stamps):
-            c = so3_exp(omega * float(t)) @ (centre0 - pivot) + pivot
-            if c[2] < radius + 1.0:
-                return False
-            p = K @ c
-            cen[b, i] = p[:2] / p[2]
-            rad[b, i] = f * radius / c[2]
+        rots = so3_exp_many(np.outer(stamps, omega))
+        c = rots @ (centre0 - pivot) + pivot                 # (F, 3)
+        if np.any(c[:, 2] < radius + 1.0):
+            return False
+        p = c @ K.T
+        cen[b] = p[:, :2] / p[:, 2:]
+        rad[b] = f * radius / c[:, 2]
     m = 0.6 * rad
     if np.any(cen[..., 0] < m) or np.any(cen[..., 0] > width - 1 - m):
         return False
