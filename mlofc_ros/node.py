@@ -38,6 +38,7 @@ from geometry_msgs.msg import TwistWithCovarianceStamped
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -288,6 +289,9 @@ def main(args: Optional[List[str]] = None) -> None:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+        rclpy.logging.get_logger('mlofc').fatal(f'cannot start: {exc}')
+        raise SystemExit(1)
     finally:
         if node is not None:
             node.destroy_node()

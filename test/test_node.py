@@ -328,3 +328,13 @@ def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
             out, _ = proc.communicate()
     assert proc.returncode == 0, out
     assert 'Traceback' not in out, out
+
+
+def test_installed_executable_refuses_invalid_parameters_with_the_reason():
+    env = dict(os.environ, HOME=os.environ.get('HOME', '/tmp'))
+    proc = subprocess.run([str(EXECUTABLE), '--ros-args', '-p', 'method:=magic'], env=env,
+                          capture_output=True, text=True, timeout=30)
+    assert proc.returncode == 1
+    out = proc.stdout + proc.stderr
+    assert 'method' in out and 'magic' in out and 'robust' in out, out
+    assert 'Traceback' not in out, out
