@@ -647,7 +647,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         strip = render_strip(seq, collected, strip_frames(cfg.frames, warmup))
         import cv2
         strip_path = out_dir / 'demo_strip.png'
-        if not cv2.imwrite(str(strip_path), strip):
+        if not cv2.imwrite(str(strip_path), strip, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
             raise DemoError(f'cannot write {strip_path}')
         total = time.monotonic() - t_start
         write_report(out_dir / 'demo.md', lines, cfg, collected, strip_path.name, argv, total)

@@ -223,3 +223,21 @@ def test_mlofc_play_user_errors(tmp_path, capsys):
     assert play_main([str(tmp_path / 'bag'), '--topics', '/nope']) == 1
     assert 'no topic(s) /nope' in capsys.readouterr().err
     assert play_main([str(tmp_path / 'bag'), '--rate', '-1']) == 2
+
+
+def test_camera_info_pairing():
+    from sensor_msgs.msg import CameraInfo
+
+    from mlofc_ros.bag.offline import CameraInfoPairing
+    info = CameraInfo(width=64, height=48, distortion_model='plumb_bob',
+                      k=[60.0, 0.0, 31.5, 0.0, 61.0, 23.5, 0.0, 0.0, 1.0], d=[0.0] * 5)
+    first = CameraInfoPairing()
+    first.add_info(info)
+    pairing = CameraInfoPairing(first.latest)          # images before any CameraInfo
+    camera, problem = pairing.camera((64, 48))
+    assert camera is not None and camera.fx == 60.0 and problem is None
+    camera, problem = pairing.camera((32, 24))          # wrong size: not used, as the node does
+    assert camera is None and '64x48' in problem
+    pairing.add_info(CameraInfo())                      # all-zero K: remembered as a problem
+    assert 'invalid CameraInfo' in pairing.problem
+    assert CameraInfoPairing().camera((64, 48)) == (None, None)

@@ -163,28 +163,43 @@ def choose_topics(topics: Dict[str, str], image_topic: Optional[str],
 
 
 class CameraInfoPairing:
-    """Pairs each image with the latest CameraInfo (the first one for images before it)."""
+    """Pairs each image with the latest CameraInfo (the first one for images before it).
 
-    def __init__(self, first: Optional[CameraModel] = None) -> None:
+    As the node does, a CameraInfo whose image size differs from the image's is not used.
+    """
+
+    def __init__(self, first: Optional[Tuple[CameraModel, Optional[Tuple[int, int]]]] = None
+                 ) -> None:
         self.first = first
-        self.latest: Optional[CameraModel] = None
+        self.latest: Optional[Tuple[CameraModel, Optional[Tuple[int, int]]]] = None
         self.problem: Optional[str] = None
 
     def add_info(self, msg: Any) -> None:
         """Take a ``sensor_msgs/CameraInfo``; an invalid one is remembered as :attr:`problem`."""
-        from mlofc_ros.ros_messages import camera_model_from_info
+        from mlofc_ros.ros_messages import camera_info_size, camera_model_from_info
         try:
-            self.latest = camera_model_from_info(msg)
+            self.latest = (camera_model_from_info(msg), camera_info_size(msg))
             self.problem = None
         except ValueError as exc:
             self.problem = f'invalid CameraInfo: {exc}'
 
-    def camera(self) -> Optional[CameraModel]:
-        """Camera of the next image (None: unknown, the focal length is estimated)."""
-        return self.latest if self.latest is not None else self.first
+    def camera(self, size: Tuple[int, int]) -> Tuple[Optional[CameraModel], Optional[str]]:
+        """Camera for an image of ``size`` ``(width, height)`` and a problem (or None).
+
+        The camera is None when unknown (the focal length is then estimated).
+        """
+        entry = self.latest if self.latest is not None else self.first
+        if entry is None:
+            return None, None
+        camera, expected = entry
+        if expected is not None and expected != size:
+            return None, (f'camera_info is for {expected[0]}x{expected[1]} images but the image '
+                          f'is {size[0]}x{size[1]}; ignoring camera_info')
+        return camera, None
 
 
-def _first_camera(bag: BagReader, info_topic: Optional[str]) -> Optional[CameraModel]:
+def _first_camera(bag: BagReader, info_topic: Optional[str]
+                  ) -> Optional[Tuple[CameraModel, Optional[Tuple[int, int]]]]:
     if info_topic is None:
         return None
     pairing = CameraInfoPairing()
@@ -267,8 +282,11 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
                 image = deserialize(msg.rawdata, msg.msgtype)
                 try:
                     gray = image_msg_to_gray(image, max_pixels=all_values['max_pixels'])
+                    camera, problem = pairing.camera((gray.shape[1], gray.shape[0]))
+                    if problem:
+                        warn('camera_size', problem)
                     result = pipeline.process(gray, stamp_to_seconds(image.header.stamp),
-                                              pairing.camera())
+                                              camera)
                 except ValueError as exc:
                     warn('image', f'frame at {msg.timestamp_ns} ns skipped: {exc}')
                     continue
