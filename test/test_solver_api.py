@@ -130,3 +130,23 @@ def test_bad_input_raises_a_named_value_error(kwargs, match):
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         segment_lines(args.pop('tracks'), args.pop('n_bodies'), **args)
+
+
+@pytest.mark.parametrize('n', [1, 2, 3, 4])
+def test_number_of_bodies_is_chosen(n):
+    tracks, labels, omegas, intr = random_scene(n, 25, n_frames=4, noise=1.0, seed=40 + n)
+    res = segment_lines(tracks, 0, intrinsics=intr)
+    assert res.n_bodies == n
+    assert misclassified(res.labels, labels, n) < 0.05
+    assert set(res.info['n_bodies_scores']) >= {1, 2}
+
+
+def test_multi_frame_beats_two_frames():
+    errs = {2: [], 5: []}
+    for trial in range(6):
+        for k in errs:
+            tracks, labels, omegas, intr = random_scene(3, 20, n_frames=k, noise=2.0,
+                                                        seed=60 + trial)
+            res = segment_lines(tracks, 3, intrinsics=intr)
+            errs[k].append(misclassified(res.labels, labels, 3))
+    assert np.mean(errs[5]) < 0.5 * np.mean(errs[2])

@@ -33,9 +33,9 @@ from .lines import LineFlows
 class TrackStats:
     """Per-track normal equations: the cost of a track under any ``c`` is a quadratic form.
 
-    ``cost(c) = c^T A c - 2 g . c + k`` with ``A = sum M^T W M``, ``g = sum M^T W b``,
-    ``k = sum b^T W b`` over the track's frame pairs and ``W`` the inverse residual covariance
-    at ``c = 0`` (weighted) or the identity. Evaluating thousands of hypotheses, or refitting
+    ``cost(c) = c^T A c - 2 g . c + k`` with ``A = sum M^T M``, ``g = sum M^T b``,
+    ``k = sum b^T b`` over the track's frame pairs, with ``M, b`` whitened per track (weighted)
+    or raw. Evaluating thousands of hypotheses, or refitting
     bodies, then costs O(N) 3x3 operations instead of O(pairs) covariance propagations.
     """
 
@@ -48,16 +48,12 @@ class TrackStats:
 
 def track_stats(flows: LineFlows, weighted: bool = True) -> TrackStats:
     """Accumulate :class:`TrackStats` of every track (vectorised over pairs)."""
-    if weighted:
-        w = flows.W
-    else:
-        w = np.broadcast_to(np.eye(2), (flows.n_pairs, 2, 2))
-    mtw = np.swapaxes(flows.M, 1, 2) @ w
+    M, b = (flows.Mw, flows.bw) if weighted else (flows.M, flows.b)
     n = flows.n_tracks
     A, g, k = np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros(n)
-    np.add.at(A, flows.pair_track, mtw @ flows.M)
-    np.add.at(g, flows.pair_track, np.einsum('pij,pj->pi', mtw, flows.b))
-    np.add.at(k, flows.pair_track, np.einsum('pi,pij,pj->p', flows.b, w, flows.b))
+    np.add.at(A, flows.pair_track, np.einsum('pji,pjk->pik', M, M))
+    np.add.at(g, flows.pair_track, np.einsum('pji,pj->pi', M, b))
+    np.add.at(k, flows.pair_track, np.sum(b * b, axis=1))
     return TrackStats(A, g, k, flows.pairs_per_track() > 0, weighted)
 
 
@@ -85,18 +81,17 @@ def fit_stats(stats: TrackStats, labels: np.ndarray, n: int) -> Tuple[np.ndarray
     return solve_normal_equations(info, rhs), info
 
 
-def pair_residuals(flows: LineFlows, c: np.ndarray) -> np.ndarray:
-    """Residuals ``(P, n, 2)`` of every pair under every body's Cayley vector ``c (n, 3)``."""
-    return np.einsum('pjk,nk->pnj', flows.M, c) - flows.b[:, None, :]
-
-
 def pair_costs(flows: LineFlows, c: np.ndarray, weighted: bool = True) -> np.ndarray:
-    """Cost ``(P, n)`` of every frame pair under every body (see the module docstring)."""
+    """Cost ``(P, n)`` of every frame pair under every body (see the module docstring).
+
+    Weighted costs use the per-track whitened residuals, so they add up to the exact
+    Mahalanobis cost of each track.
+    """
     c = np.atleast_2d(np.asarray(c, dtype=float))
-    r = pair_residuals(flows, c)
-    if weighted:
-        return np.einsum('pni,pij,pnj->pn', r, flows.W, r)
-    return np.sum(r * r, axis=2) / (1.0 + np.sum(c * c, axis=1))[None, :]
+    M, b = (flows.Mw, flows.bw) if weighted else (flows.M, flows.b)
+    r = np.einsum('pjk,nk->pnj', M, c) - b[:, None, :]
+    cost = np.sum(r * r, axis=2)
+    return cost if weighted else cost / (1.0 + np.sum(c * c, axis=1))[None, :]
 
 
 def track_costs(flows: LineFlows, c: np.ndarray, weighted: bool = True) -> np.ndarray:

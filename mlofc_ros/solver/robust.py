@@ -37,13 +37,6 @@ from .models import (chi2_quantile, fit_bodies, quad_costs, solve_normal_equatio
 OUTLIER_P = 0.999
 
 
-def whitened_rows(flows: LineFlows, stats: TrackStats) -> np.ndarray:
-    """Rows ``(2P, 4)`` multiplied by ``S^-1/2`` so every residual has unit variance (1 px)."""
-    val, vec = np.linalg.eigh(flows.W)                              # W = S^-1 at c = 0
-    inv_sqrt = vec @ (np.swapaxes(vec, 1, 2) * np.sqrt(np.maximum(val, 0.0))[..., None])
-    return (inv_sqrt @ flows.rows).reshape(-1, 4)
-
-
 def noise_sigma(costs: np.ndarray, labels: np.ndarray, dof: np.ndarray,
                 floor: float = 1e-6) -> float:
     """Robust endpoint noise (px) from the costs of the labelled tracks (median of chi-square)."""
@@ -118,7 +111,7 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
     if n == 1:
         starts.append(('all', np.where(stats.usable, 0, -1)))
     else:
-        for name, rows in (('gpca-weighted', whitened_rows(flows, stats)),
+        for name, rows in (('gpca-weighted', flows.whitened_rows.reshape(-1, 4)),
                            ('gpca', flows.rows.reshape(-1, 4))):
             try:
                 u = algebraic_normals(rows, n)

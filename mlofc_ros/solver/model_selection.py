@@ -1,0 +1,82 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Choosing the number of bodies (``n_bodies=0``): a BIC-style score on truncated costs.
+
+For ``n = 1 .. n_max`` the method is run; every track costs its chi-square under its best body,
+capped at the outlier bound, all at ONE noise level (the one estimated with the richest model,
+so that an under-fitted model cannot hide behind an inflated noise estimate). The score adds
+``3 log(rows)`` per body (three rotation parameters) and ``2 log n`` per track (its label), and
+the smallest score wins: a further body must explain more than it costs to describe.
+"""
+from typing import Optional, Sequence, Tuple
+
+import numpy as np
+
+from .models import chi2_quantile
+from .result import SegmentationResult
+from .robust import noise_sigma, OUTLIER_P
+
+#: Largest number of bodies considered by default.
+MAX_BODIES = 5
+#: A body counts only with at least this many lines, and this fraction of the usable lines.
+MIN_BODY_LINES = 4
+MIN_BODY_FRACTION = 0.04
+
+
+def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) -> float:
+    """BIC of a segmentation: ``R log(RSS / R) + 3 n log R + 2 N log n``.
+
+    ``2 N log n`` is minus twice the log-likelihood of the labels under a uniform prior: with
+    two frames a line has only two equations, and the freedom to pick the best of n bodies
+    alone lowers the residual of pure noise by a factor of about n.
+
+    ``RSS`` sums every track's cost capped at the outlier bound (at noise ``sigma``, or the
+    model's own robust noise estimate when None); ``R`` rows, ``N`` usable tracks.
+    """
+    n = res.n_bodies
+    usable = dof > 0
+    best = np.nanmin(res.costs[usable], axis=1)
+    if sigma is None:
+        sigma = max(noise_sigma(res.costs, res.labels, dof), 1e-9)
+    cap = chi2_quantile(OUTLIER_P, dof[usable]) * sigma ** 2
+    rss = float(np.sum(np.minimum(best, cap)))
+    rows = float(np.sum(dof))
+    return (rows * np.log(max(rss, 1e-300) / rows) + 3.0 * n * np.log(max(rows, 2.0))
+            + 2.0 * usable.sum() * np.log(n))
+
+
+def select_bodies(tracks: np.ndarray, intrinsics: Optional[Tuple[float, ...]],
+                  image_size: Sequence[float], method: str, *, seed: int = 0,
+                  max_bodies: int = MAX_BODIES) -> SegmentationResult:
+    """Run ``method`` for n = 1..max_bodies and return the result with the best score."""
+    from .core import min_tracks_needed, segment_lines
+    ok = np.isfinite(tracks[..., 0])
+    dof = 2.0 * np.sum(ok[:, :-1] & ok[:, 1:], axis=1)
+    usable = int(np.sum(dof > 0))
+    results = []
+    for n in range(1, max_bodies + 1):
+        if usable < min_tracks_needed(n, tracks.shape[1], method, intrinsics is not None):
+            break
+        results.append(segment_lines(tracks, n, intrinsics, image_size, method, seed=seed))
+    if not results:
+        raise ValueError(f'{usable} usable tracks: too few to fit even one body')
+    # a body must hold a few lines: with 2 frames, 2 lines (4 equations, 3 unknowns) fit any
+    # rotation, so tiny "bodies" would soak up the worst-fitting lines of a real one
+    min_lines = max(MIN_BODY_LINES, int(np.ceil(MIN_BODY_FRACTION * usable)))
+    scores = [bic_score(r, None, dof)
+              if np.all(np.bincount(r.labels[r.labels >= 0], minlength=r.n_bodies) >= min_lines)
+              or r.n_bodies == 1 else np.inf for r in results]
+    best = results[int(np.argmin(scores))]
+    best.info['n_bodies_scores'] = dict(zip(range(1, len(scores) + 1), scores))
+    return best
