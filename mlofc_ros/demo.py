@@ -525,13 +525,16 @@ def summary_lines(seq: Any, ev: Evaluation, collected: Collected, cfg: DemoConfi
                if g not in ev.mapping.values()]
     if missing:
         lines.append(f'not found: {", ".join(missing)}')
+    labelled = (int(round(ev.assigned_fraction * ev.matched_segments))
+                if ev.matched_segments else 0)
     lines.append(f'label accuracy {100 * ev.label_accuracy:.1f} % of '
-                 f'{int(round(ev.assigned_fraction * ev.matched_segments))} labelled segments on '
+                 f'{labelled} labelled segments on '
                  f'true edges ({100 * ev.assigned_fraction:.1f} % of the {ev.matched_segments} '
                  f'matched, {ev.total_segments} detected; frames >= {ev.first_scored_frame})')
     lat = [o.latency for o in collected.frames.values() if math.isfinite(o.latency)]
+    median = 1e3 * float(np.median(lat)) if lat else math.nan
     lines.append(f'node: {len(collected.frames)}/{cfg.frames} frames answered in '
-                 f'{collected.wall_time:.1f} s (median latency {1e3 * np.median(lat):.0f} ms/'
+                 f'{collected.wall_time:.1f} s (median latency {median:.0f} ms/'
                  f'frame), {len(collected.dropped)} unanswered')
     return lines
 

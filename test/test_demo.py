@@ -71,3 +71,17 @@ def test_demo_fails_cleanly_when_the_node_does_not_answer(tmp_path, monkeypatch,
     assert rc == 1
     assert 'did not come up' in err and 'Traceback' not in err
     assert not (tmp_path / 'demo.md').exists()
+
+
+def test_summary_survives_a_node_that_found_nothing():
+    from types import SimpleNamespace
+    seq = SimpleNamespace(body_names=['background', 'box0'],
+                          angular_velocities=np.zeros((2, 3)),
+                          truth=[SimpleNamespace(segments=np.zeros((0, 4)),
+                                                 body_ids=np.zeros(0, np.int64))] * 3)
+    collected = demo.Collected()
+    collected.frames[2] = demo.FrameOutput(np.zeros((0, 4)), np.zeros(0), np.zeros(0, np.int64),
+                                           np.zeros(0))
+    ev = demo.evaluate(seq, collected, warmup=1)
+    lines = demo.summary_lines(seq, ev, collected, demo.DemoConfig(frames=3, boxes=1))
+    assert any('not found: background, box0' in line for line in lines)
