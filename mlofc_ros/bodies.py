@@ -99,29 +99,40 @@ class BodyTracker:
 
     def reset(self) -> None:
         """Forget everything: the next window is numbered afresh."""
-        self._track_ids = np.zeros(0, dtype=np.int64)   # sorted
-        self._track_labels = np.zeros(0, dtype=np.int64)
+        self.forget_tracks()
         self._omegas: Dict[int, np.ndarray] = {}
         self.n_slots = 0
 
     def forget_tracks(self) -> None:
         """Forget the track labels (the tracker restarted and may reuse ids); keep the omegas."""
-        self._track_ids = np.zeros(0, dtype=np.int64)
+        self._track_ids = np.zeros(0, dtype=np.int64)      # sorted
         self._track_labels = np.zeros(0, dtype=np.int64)
+        self._track_ages = np.zeros(0, dtype=np.int64)     # updates since the solver assigned it
 
     @property
     def track_labels(self) -> Dict[int, int]:
         """Carried ``{track_id: stable body id}``."""
         return dict(zip(self._track_ids.tolist(), self._track_labels.tolist()))
 
-    def previous_labels(self, track_ids: np.ndarray) -> np.ndarray:
-        """Stable body id each track had in earlier windows (``-1`` when unknown), (N,) int64."""
+    def _find(self, track_ids: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Positions of ``track_ids`` in the memory and whether each is there."""
         ids = np.asarray(track_ids, dtype=np.int64).ravel()
-        out = np.full(ids.shape, -1, dtype=np.int64)
-        if self._track_ids.size and ids.size:
-            pos = np.clip(np.searchsorted(self._track_ids, ids), 0, self._track_ids.size - 1)
-            hit = self._track_ids[pos] == ids
-            out[hit] = self._track_labels[pos[hit]]
+        if not self._track_ids.size or not ids.size:
+            return np.zeros(ids.shape, dtype=np.intp), np.zeros(ids.shape, dtype=bool)
+        pos = np.clip(np.searchsorted(self._track_ids, ids), 0, self._track_ids.size - 1)
+        return pos, self._track_ids[pos] == ids
+
+    def previous_labels(self, track_ids: np.ndarray,
+                        max_age: Optional[int] = None) -> np.ndarray:
+        """Stable body id each track had in earlier windows (``-1`` when unknown), (N,) int64.
+
+        With ``max_age``, only labels the solver confirmed at most ``max_age`` updates ago.
+        """
+        pos, hit = self._find(track_ids)
+        if max_age is not None and hit.any():
+            hit &= self._track_ages[pos] <= max_age
+        out = np.full(hit.shape, -1, dtype=np.int64)
+        out[hit] = self._track_labels[pos[hit]]
         return out
 
     def update(self, track_ids: np.ndarray, labels: np.ndarray,
@@ -187,12 +198,16 @@ class BodyTracker:
     def _remember(self, ids: np.ndarray, lab: np.ndarray, w: np.ndarray, valid: np.ndarray,
                   mapping: np.ndarray) -> None:
         stable = relabel(lab, mapping)
-        prev = self.previous_labels(ids)
+        pos, hit = self._find(ids)
+        prev = np.where(hit, self._track_labels[pos] if self._track_labels.size else -1, -1)
+        age = np.where(hit, self._track_ages[pos] if self._track_ages.size else 0, 0)
         carried = np.where(stable >= 0, stable, prev)   # unassigned now: keep the old label
+        ages = np.where(stable >= 0, 0, age + 1)
         keep = carried >= 0
         order = np.argsort(ids[keep], kind='stable')
         self._track_ids = ids[keep][order]
         self._track_labels = carried[keep][order]
+        self._track_ages = ages[keep][order]
         for j in np.flatnonzero(valid):
             self._omegas[int(mapping[j])] = w[j].copy()
         self.n_slots = max(self.n_slots, int(mapping.max()) + 1)

@@ -107,6 +107,10 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               'A track must be seen in at least this many frames of the window to be segmented '
               '(capped at `window`).',
               range=(2, 30)),
+    ParamSpec('label_memory', int, 10,
+              'A track the solver leaves unassigned (outlier in this window) keeps the body id '
+              "it was last assigned for up to this many frames; 0 = report the solver's -1.",
+              range=(0, 1000)),
     ParamSpec('focal_length', float, 0.0,
               'Focal length in pixels. 0 = use camera_info (or estimate it when there is none); '
               '> 0 = fx = fy = focal_length with the principal point at the image centre, '

@@ -60,6 +60,8 @@ class FrameResult:
         Track id of every segment.
     labels : (M,) int32
         Stable body id of every segment, ``-1`` unassigned (new track, outlier, or no solve).
+        A track the solver leaves unassigned in this window keeps the id it was last assigned
+        for up to ``label_memory`` frames (see :attr:`carried`).
     residuals : (M,) float32
         Residual of every segment's track under its body (solver units, pixels-equivalent);
         NaN when not solved.
@@ -84,6 +86,8 @@ class FrameResult:
         Tracks handed to the solver.
     skipped : bool
         True when the frame was not processed at all (duplicate stamp): nothing to publish.
+    carried : (M,) bool
+        True where the label was carried over from an earlier window, not given by this solve.
     """
 
     stamp: float
@@ -101,6 +105,7 @@ class FrameResult:
     frame_interval: float = math.nan
     n_tracks: int = 0
     skipped: bool = False
+    carried: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     @property
     def solved(self) -> bool:
@@ -335,6 +340,7 @@ class Pipeline:
         fill = len(self._stamps)
         interval = float(np.median(np.diff(self._stamps))) if fill >= 2 else math.nan
         labels = np.full(len(segments), -1, dtype=np.int32)
+        carried = np.zeros(len(segments), dtype=bool)
         residuals = np.full(len(segments), np.nan, dtype=np.float32)
         focal = math.nan
         t = time.perf_counter()
@@ -368,6 +374,11 @@ class Pipeline:
             v_out[mapping] = valid
             stable = relabel(res.labels, mapping)
             labels = _lookup(track_ids, win_ids, stable.astype(np.int32), -1).astype(np.int32)
+            memory = int(self.params['label_memory'])
+            if memory > 0:
+                old = self.bodies.previous_labels(track_ids, max_age=memory)
+                carried = (labels < 0) & (old >= 0)
+                labels = np.where(carried, old, labels).astype(np.int32)
             residuals = _lookup(track_ids, win_ids,
                                 np.asarray(res.residuals, dtype=np.float32), np.nan)
             focal = float(res.focal_length)
@@ -379,4 +390,4 @@ class Pipeline:
             residuals=residuals.astype(np.float32), angular_velocities=w_out,
             angular_covariances=c_out, body_valid=v_out, timings=timings, window_fill=fill,
             problem='; '.join(problems) or None, focal_length=focal, frame_interval=interval,
-            n_tracks=int(len(win_ids)))
+            n_tracks=int(len(win_ids)), carried=carried)

@@ -221,7 +221,7 @@ def test_in_process_two_boxes_one_cloud_per_image_and_accuracy(ros):
               {k: round(v, 4) for k, v in ev.items()})
         assert ev['wrong'] <= GOAL_MISCLASSIFIED, ev
         assert ev['omega_error'] <= GOAL_OMEGA_ERROR, ev
-        assert ev['unassigned'] < 0.35, ev
+        assert ev['unassigned'] < 0.15, ev
     finally:
         h.close(node)
 
