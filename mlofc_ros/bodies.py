@@ -17,8 +17,9 @@ The solver numbers its bodies arbitrarily in every window. :class:`BodyTracker` 
 stable ids: body ``i`` of this window gets the id of the previous body that shares most of its
 tracks (the tracker's track ids carry their previous label across windows) and, second, whose
 angular velocity is closest. The assignment is exact (maximum total score over all permutations;
-``n <= 8`` bodies). The first window numbers bodies by decreasing track count, so the static
-background (usually the largest body) is body 0, and body ``i`` keeps its id while it is seen.
+``n <= 8`` bodies). The first window numbers bodies by decreasing image extent (bounding box of
+their tracks; track count when positions are not given), so the background, which spans the
+image, is usually body 0; body ``i`` keeps its id while it is seen.
 """
 import functools
 import itertools
@@ -137,7 +138,8 @@ class BodyTracker:
 
     def update(self, track_ids: np.ndarray, labels: np.ndarray,
                angular_velocities: np.ndarray,
-               valid: Optional[np.ndarray] = None) -> np.ndarray:
+               valid: Optional[np.ndarray] = None,
+               positions: Optional[np.ndarray] = None) -> np.ndarray:
         """Match this window's bodies to the stable ones and remember the result.
 
         Parameters
@@ -150,6 +152,10 @@ class BodyTracker:
             Angular velocity of every solver body (any consistent unit, e.g. rad/s).
         valid : (n,) bool, optional
             Bodies whose angular velocity is trustworthy (default: finite ones).
+        positions : (N, 2) float, optional
+            Image position (px) of every track, e.g. its midpoint. When given, the first window
+            numbers bodies by decreasing spatial spread of their tracks (the background spans
+            the image, objects do not); otherwise by decreasing track count.
 
         Returns
         -------
@@ -171,13 +177,28 @@ class BodyTracker:
         lab = np.where(lab < n, lab, -1)
         counts = np.bincount(lab[lab >= 0], minlength=n)[:n]
         if self.n_slots == 0:
-            order = np.argsort(-counts, kind='stable')
+            order = np.argsort(-self._size(lab, counts, n, positions), kind='stable')
             mapping = np.empty(n, dtype=np.int64)
             mapping[order] = np.arange(n)
         else:
             mapping = assign(self._score(ids, lab, w, valid, n)).astype(np.int64)
         self._remember(ids, lab, w, valid, mapping)
         return mapping
+
+    @staticmethod
+    def _size(lab: np.ndarray, counts: np.ndarray, n: int,
+              positions: Optional[np.ndarray]) -> np.ndarray:
+        """(n,) size of every body: spread of its track positions (px^2), else track count."""
+        if positions is None:
+            return counts.astype(float)
+        pos = np.asarray(positions, dtype=float).reshape(-1, 2)
+        ok = (lab >= 0) & np.all(np.isfinite(pos), axis=1)
+        size = np.zeros(n)
+        for j in range(n):                  # n <= 8 bodies
+            p = pos[ok & (lab == j)]
+            if len(p) >= 2:
+                size[j] = float(np.prod(p.max(axis=0) - p.min(axis=0)))
+        return size + 1e-6 * counts         # ties (or no positions): more tracks first
 
     def _score(self, ids: np.ndarray, lab: np.ndarray, w: np.ndarray, valid: np.ndarray,
                n: int) -> np.ndarray:

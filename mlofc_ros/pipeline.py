@@ -366,7 +366,10 @@ class Pipeline:
             cov = cov / interval ** 2
             valid = (np.all(np.isfinite(omega), axis=1)
                      & np.all(np.isfinite(cov.reshape(len(cov), -1)), axis=1))
-            mapping = self.bodies.update(win_ids, res.labels, omega, valid)
+            tracks = np.asarray(win_tracks, dtype=float)
+            with np.errstate(invalid='ignore'):
+                mid = np.nanmean(0.5 * (tracks[..., :2] + tracks[..., 2:]), axis=1)
+            mapping = self.bodies.update(win_ids, res.labels, omega, valid, positions=mid)
             n_out = max(self.n_bodies, int(mapping.max()) + 1 if mapping.size else 0)
             w_out, c_out, v_out = _invalid_bodies(n_out)
             w_out[mapping] = omega

@@ -137,6 +137,8 @@ def test_two_boxes_segmentation_and_angular_velocity_once_the_window_is_full():
     assert ev['omega_error'] <= GOAL_OMEGA_ERROR, ev
     assert ev['static_deg_s'] < 3.0, ev
     assert all(r.body_valid.all() for r in results[4:])
+    static = [int(np.argmin(np.linalg.norm(r.angular_velocities, axis=1))) for r in results[1:]]
+    assert set(static) == {0}                                       # the wall is body 0
     # unassigned segments (new tracks, tracks the solver rejects as outliers): measured and
     # reported; carrying labels over from earlier windows (label_memory) removes most of them
     assert ev['unassigned'] < 0.15, ev
@@ -377,6 +379,14 @@ def test_body_ids_first_window_ordered_by_size_and_unassigned_tracks_keep_labels
     assert list(mapping) == [0, 2, 1]
     labels = bt.track_labels
     assert labels[4] == 2 and labels[5] == 1 and labels[6] == 1    # updated / carried
+
+
+def test_first_window_numbers_the_widest_body_first():
+    bt = BodyTracker()
+    lab = np.array([0, 0, 0, 0, 1, 1])                              # body 1: fewer tracks ...
+    pos = np.array([[300, 200], [305, 210], [310, 205], [302, 215], [10, 10], [600, 450.0]])
+    mapping = bt.update(np.arange(6), lab, np.zeros((2, 3)), positions=pos)
+    assert list(mapping) == [1, 0]                                  # ... but spans the image
 
 
 def test_carried_labels_expire():
