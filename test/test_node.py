@@ -37,11 +37,13 @@ from test_pipeline import (evaluate, GOAL_MISCLASSIFIED, GOAL_OMEGA_ERROR, small
                            two_box_sequence)
 
 from mlofc_ros import params as P
+from mlofc_ros.camera import CameraModel
 from mlofc_ros.image.encodings import gray_to_image_fields
 from mlofc_ros.messages.segments import SEGMENT_FIELDS
 from mlofc_ros.node import MlofcNode, parameter_descriptor
-from mlofc_ros.ros_messages import (LINEAR_UNKNOWN_VARIANCE, parse_segments_msg,
-                                    parse_twist_msg, stamp_to_seconds)
+from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info,
+                                    LINEAR_UNKNOWN_VARIANCE, parse_segments_msg, parse_twist_msg,
+                                    segments_msg, stamp_to_seconds, twist_msg)
 
 
 pytestmark = pytest.mark.ros
@@ -156,6 +158,63 @@ def send_frames(h: Harness, pub, frames, stamps, clouds: List, cam_pub=None, cam
                 break
         assert len(clouds) > n, f'no ~/segments for the frame at {t:.3f} s'
         assert stamp_of(clouds[-1]) == round(t, 6)
+
+
+# --- message builders (no DDS) -------------------------------------------------------------
+
+
+def test_segment_cloud_round_trip_and_empty_cloud():
+    header = image_msg(np.zeros((2, 2), np.uint8), 1.5).header
+    segs = np.array([[1, 2, 3, 4], [5.5, 6, 7, 8]], np.float32)
+    msg = segments_msg(header, segs, np.array([7, 9], np.uint32), np.array([-1, 2]),
+                       np.array([np.nan, 0.25], np.float32))
+    assert msg.width == 2 and msg.point_step == 28 and msg.row_step == 56
+    assert msg.header.frame_id == FRAME_ID and stamp_of(msg) == 1.5
+    s, ids, labels, res = parse_segments_msg(msg)
+    np.testing.assert_array_equal(s, segs)
+    assert ids.tolist() == [7, 9] and labels.tolist() == [-1, 2]
+    assert np.isnan(res[0]) and res[1] == np.float32(0.25)
+    empty = segments_msg(header, np.zeros((0, 4)), np.zeros(0, np.uint32), np.zeros(0, int),
+                         np.zeros(0))
+    assert empty.width == 0 and len(empty.data) == 0 and len(empty.fields) == 7
+    msg.fields[0].offset = 4
+    with pytest.raises(ValueError, match='layout'):
+        parse_segments_msg(msg)
+
+
+def test_twist_covariance_and_undetermined_bodies():
+    header = image_msg(np.zeros((2, 2), np.uint8), 0.0).header
+    cov = np.diag([1e-4, 2e-4, 3e-4])
+    msg = twist_msg(header, np.array([0.1, -0.2, 0.3]), cov)
+    w, c = parse_twist_msg(msg)
+    np.testing.assert_allclose(w, [0.1, -0.2, 0.3])
+    np.testing.assert_allclose(c, cov)
+    full = np.asarray(msg.twist.covariance).reshape(6, 6)
+    assert np.all(np.diag(full)[:3] == LINEAR_UNKNOWN_VARIANCE)
+    assert msg.twist.twist.linear.x == 0.0 and np.all(full[:3, 3:] == 0)
+    bad = twist_msg(header, np.array([np.nan, 0.0, 0.0]), np.full((3, 3), np.inf))
+    w, c = parse_twist_msg(bad)
+    assert np.all(np.isfinite(w)) and np.all(np.isinf(np.diag(c)))
+
+
+def test_camera_info_parsing_with_binning_and_roi():
+    cam = CameraModel(500.0, 510.0, 320.0, 240.0, (0.1, 0.0, 0.0, 0.0, 0.0), 'plumb_bob')
+    info = camera_info_msg(cam, (640, 480))
+    assert camera_model_from_info(info) == cam
+    assert camera_info_size(info) == (640, 480)
+    info.binning_x = info.binning_y = 2
+    info.roi.x_offset, info.roi.y_offset = 100, 40
+    info.roi.width, info.roi.height = 400, 300
+    binned = camera_model_from_info(info)
+    assert (binned.fx, binned.fy, binned.cx, binned.cy) == (250.0, 255.0, 110.0, 100.0)
+    assert camera_info_size(info) == (200, 150)
+    info.k = [0.0] * 9
+    with pytest.raises(ValueError, match='zero'):
+        camera_model_from_info(info)
+    info = camera_info_msg(cam, (640, 480))
+    info.d = [0.1, 0.2]
+    with pytest.raises(ValueError, match='coefficients'):
+        camera_model_from_info(info)
 
 
 # --- in process --------------------------------------------------------------------------
