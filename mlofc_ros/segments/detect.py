@@ -19,7 +19,7 @@ walking from ``(u1, v1)`` to ``(u2, v2)``, the brighter side is on the left in t
 with ``v`` pointing down, is the side of ``(dv, -du)``). Orientation lets the tracker tell apart
 the two edges of a thin bar.
 """
-from typing import Callable, Optional, Union
+from typing import Callable, Optional, Tuple, Union
 
 import cv2
 import numpy as np
@@ -68,79 +68,110 @@ def orient_by_polarity(gray: np.ndarray, segments: np.ndarray, offset: float = 1
     return out
 
 
-def _connected_labels(adj: np.ndarray) -> np.ndarray:
-    """Connected-component labels (M,) of a symmetric boolean adjacency (M, M).
+def _connected_labels(m: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Connected-component labels (m,) of the undirected graph with edges ``(i[k], j[k])``.
 
-    Min-label propagation with pointer jumping (vectorised; a few iterations for merge graphs).
+    Min-label propagation along the edge list with pointer jumping (vectorised; a few
+    iterations for merge graphs). Labels are the smallest member index of each component.
     """
-    m = adj.shape[0]
     labels = np.arange(m)
-    big = m
     while True:
-        nb = np.where(adj, labels[None, :], big).min(axis=1)
-        new = np.minimum(labels, nb)
-        new = new[new]                      # pointer jumping speeds up long chains
+        new = labels.copy()
+        np.minimum.at(new, i, labels[j])
+        np.minimum.at(new, j, labels[i])
+        new = new[new]                      # pointer jumping shortens long chains
         if np.array_equal(new, labels):
             return labels
         labels = new
 
 
+def _angle_pairs(theta: np.ndarray, width: np.ndarray, period: float
+                 ) -> Tuple[np.ndarray, np.ndarray]:
+    """Index pairs ``(i, j)``, ``i != j``, with ``|theta_j - theta_i| <= width_i`` (periodic).
+
+    ``theta`` (M,) angles in ``[0, period)``, ``width`` (M,) half-window per segment (rad, at
+    most ``period / 2``). Sort + ``searchsorted`` on the angles tripled over three periods, so the
+    cost follows the number of candidate pairs rather than M^2.
+    """
+    m = theta.size
+    order = np.argsort(theta)
+    a = theta[order]
+    ext = np.concatenate([a - period, a, a + period])
+    ext_idx = np.concatenate([order, order, order])
+    lo = np.searchsorted(ext, theta - width, 'left')
+    hi = np.searchsorted(ext, theta + width, 'right')
+    cnt = hi - lo
+    i = np.repeat(np.arange(m), cnt)
+    starts = np.repeat(lo - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt)
+    j = ext_idx[starts + np.arange(i.size)]
+    keep = i != j
+    return i[keep], j[keep]
+
+
 def merge_collinear(segments: np.ndarray, angle_deg: float = 2.0, offset_px: float = 1.5,
-                    gap_px: float = 10.0, oriented: bool = True) -> np.ndarray:
+                    gap_px: float = 10.0, oriented: bool = False) -> np.ndarray:
     """Merge collinear fragments of the same line into single segments.
 
     Two segments ``(M, 4)`` px join when their directions differ by less than ``angle_deg``
-    (as oriented directions when ``oriented``, else modulo 180 deg), every endpoint of each lies
-    within ``offset_px`` of the other's infinite line, and the gap between their extents along
-    the line is below ``gap_px`` (overlap allowed). Joined groups (transitively) are replaced
-    by the total-least-squares line through the length-weighted segments, spanning the extreme
-    endpoint projections; a group whose endpoints stray more than ``offset_px`` from that fit
-    is left unmerged. Returns (K, 4) float32, K <= M (merged segments first come in order of
-    their first member).
+    (or ``atan(offset_px / shorter length)`` when larger, capped at 20 deg: short fragments
+    have noisy angles, and the endpoint test below bounds the angle anyway), every endpoint of
+    each lies within ``offset_px`` of the other's infinite line, and the gap between their
+    extents along the line is below ``gap_px`` (overlap allowed). Directions are compared as
+    oriented when ``oriented``, else modulo 180 deg, so that pieces of one line whose contrast
+    polarity flips (e.g. where stripes cross it) still join. Joined groups (transitively) are
+    replaced by the total-least-squares line through the length-weighted segments, spanning the
+    extreme endpoint projections and oriented like the length-weighted majority of its members;
+    a group whose endpoints stray more than ``offset_px`` from that fit is left unmerged.
+    Returns (K, 4) float32, K <= M, in the order of each output's first member.
     """
     s = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
     m = s.shape[0]
     if m < 2:
         return s.astype(np.float32)
-    p1, p2 = s[:, :2], s[:, 2:]
-    d = p2 - p1
-    length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
-    u = d / length[:, None]                                   # unit directions (M, 2)
-    nrm = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    c = 0.5 * (p1 + p2)
-    cosang = u @ u.T
-    cos_thr = np.cos(np.deg2rad(angle_deg))
-    ok = (cosang >= cos_thr) if oriented else (np.abs(cosang) >= cos_thr)
-    np.fill_diagonal(ok, False)
-    i, j = np.nonzero(np.triu(ok))
+    x1, y1, x2, y2 = s.T                                      # 1-D columns index fastest
+    dx, dy = x2 - x1, y2 - y1
+    length = np.maximum(np.hypot(dx, dy), 1e-9)
+    ux, uy = dx / length, dy / length                         # unit directions
+    cx, cy = 0.5 * (x1 + x2), 0.5 * (y1 + y2)
+    period = 2.0 * np.pi if oriented else np.pi
+    theta = np.mod(np.arctan2(uy, ux), period)
+    width = np.minimum(np.maximum(np.deg2rad(angle_deg), np.arctan2(offset_px, length)),
+                       np.deg2rad(20.0))
+    i, j = _angle_pairs(theta, width, period)
+    # cheap spatial gate first: centres no further apart than half lengths + gap
+    ok = np.hypot(cx[j] - cx[i], cy[j] - cy[i]) <= 0.5 * (length[i] + length[j]) + gap_px
+    i, j = i[ok], j[ok]
+    # exact angle test with the shorter segment's tolerance
+    cosang = ux[i] * ux[j] + uy[i] * uy[j]
+    if not oriented:
+        cosang = np.abs(cosang)
+    ok = cosang >= np.cos(np.maximum(width[i], width[j]))
+    i, j = i[ok], j[ok]
     if i.size == 0:
         return s.astype(np.float32)
-    # perpendicular distances of j's endpoints to line i and vice versa
-    off_ij = np.maximum(np.abs(np.einsum('kd,kd->k', p1[j] - c[i], nrm[i])),
-                        np.abs(np.einsum('kd,kd->k', p2[j] - c[i], nrm[i])))
-    off_ji = np.maximum(np.abs(np.einsum('kd,kd->k', p1[i] - c[j], nrm[j])),
-                        np.abs(np.einsum('kd,kd->k', p2[i] - c[j], nrm[j])))
-    # extents along line i
+    # perpendicular distances (normal (-uy, ux)) of j's endpoints to line i and vice versa
+    nxi, nyi, nxj, nyj = -uy[i], ux[i], -uy[j], ux[j]
+    off_ij = np.maximum(np.abs((x1[j] - cx[i]) * nxi + (y1[j] - cy[i]) * nyi),
+                        np.abs((x2[j] - cx[i]) * nxi + (y2[j] - cy[i]) * nyi))
+    off_ji = np.maximum(np.abs((x1[i] - cx[j]) * nxj + (y1[i] - cy[j]) * nyj),
+                        np.abs((x2[i] - cx[j]) * nxj + (y2[i] - cy[j]) * nyj))
+    # gap between the extents along line i
     ti = 0.5 * length[i]
-    a = np.einsum('kd,kd->k', p1[j] - c[i], u[i])
-    b = np.einsum('kd,kd->k', p2[j] - c[i], u[i])
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    gap = np.maximum(lo - ti, -ti - hi)
+    a = (x1[j] - cx[i]) * ux[i] + (y1[j] - cy[i]) * uy[i]
+    b = (x2[j] - cx[i]) * ux[i] + (y2[j] - cy[i]) * uy[i]
+    gap = np.maximum(np.minimum(a, b) - ti, -ti - np.maximum(a, b))
     keep = (off_ij <= offset_px) & (off_ji <= offset_px) & (gap <= gap_px)
     if not keep.any():
         return s.astype(np.float32)
-    adj = np.zeros((m, m), dtype=bool)
-    adj[i[keep], j[keep]] = True
-    adj |= adj.T
-    labels = _connected_labels(adj)
+    labels = _connected_labels(m, i[keep], j[keep])
     uniq, inv, counts = np.unique(labels, return_inverse=True, return_counts=True)
     if counts.max() == 1:
         return s.astype(np.float32)
-    return _fit_groups(s, inv, len(uniq), counts, offset_px, oriented).astype(np.float32)
+    return _fit_groups(s, inv, len(uniq), counts, offset_px).astype(np.float32)
 
 
-def _fit_groups(s: np.ndarray, inv: np.ndarray, k: int, counts: np.ndarray, offset_px: float,
-                oriented: bool) -> np.ndarray:
+def _fit_groups(s: np.ndarray, inv: np.ndarray, k: int, counts: np.ndarray,
+                offset_px: float) -> np.ndarray:
     """Replace each multi-member group of segments (M, 4) by its TLS segment (see merge)."""
     p1, p2 = s[:, :2], s[:, 2:]
     d = p2 - p1
@@ -156,12 +187,10 @@ def _fit_groups(s: np.ndarray, inv: np.ndarray, k: int, counts: np.ndarray, offs
     syy = np.bincount(inv, w * (dy * dy + d[:, 1] ** 2 / 12.0), k)
     theta = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
     ux, uy = np.cos(theta), np.sin(theta)
-    # keep the orientation of the group's summed direction
-    if oriented:
-        sdx = np.bincount(inv, d[:, 0], k)
-        sdy = np.bincount(inv, d[:, 1], k)
-        flip = (ux * sdx + uy * sdy) < 0
-        ux, uy = np.where(flip, -ux, ux), np.where(flip, -uy, uy)
+    # orientation of the length-weighted majority: sum of the members' signed projections
+    proj = d[:, 0] * ux[inv] + d[:, 1] * uy[inv]
+    flip = np.bincount(inv, proj, k) < 0
+    ux, uy = np.where(flip, -ux, ux), np.where(flip, -uy, uy)
     pts = np.concatenate([p1, p2])                       # (2M, 2)
     g = np.concatenate([inv, inv])
     t = (pts[:, 0] - cx[g]) * ux[g] + (pts[:, 1] - cy[g]) * uy[g]
@@ -200,7 +229,8 @@ class LineDetector:
 
     def __init__(self, min_length: float = 20.0, scale: float = 0.5, backend: Backend = 'lsd',
                  merge: bool = True, merge_angle_deg: float = 2.0, merge_offset_px: float = 1.5,
-                 merge_gap_px: float = 10.0, orient: bool = True, refine: bool = True) -> None:
+                 merge_gap_px: float = 10.0, merge_oriented: bool = False, orient: bool = True,
+                 refine: bool = True) -> None:
         if not min_length >= 0:
             raise ValueError(f'min_length must be >= 0, got {min_length}')
         if not 0.0 < scale <= 1.0:
@@ -215,6 +245,7 @@ class LineDetector:
         self.merge_angle_deg = float(merge_angle_deg)
         self.merge_offset_px = float(merge_offset_px)
         self.merge_gap_px = float(merge_gap_px)
+        self.merge_oriented = bool(merge_oriented) and bool(orient)
         self.orient = bool(orient)
         self._impl = self._make_backend(backend, refine)
 
@@ -285,6 +316,6 @@ class LineDetector:
             seg = orient_by_polarity(gray, seg)
         if self.merge and seg.shape[0] > 1:
             seg = merge_collinear(seg, self.merge_angle_deg, self.merge_offset_px,
-                                  self.merge_gap_px, oriented=self.orient)
+                                  self.merge_gap_px, oriented=self.merge_oriented)
         return np.ascontiguousarray(seg[segment_lengths(seg) >= self.min_length],
                                     dtype=np.float32)

@@ -11,40 +11,46 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Line tracking with persistent ids: KLT prediction + association with fresh detections.
+"""Line tracking with persistent ids: lines carried frame to frame, refreshed by detection.
 
-Per frame (everything vectorised over tracks and detections):
+Per frame, vectorised over tracks and detections (no Python loop per line):
 
-1. *Predict*: a few points sampled along every live track are followed from the previous
-   frame with pyramidal Lucas-Kanade (``cv2.calcOpticalFlowPyrLK``) and back again; points
-   whose forward-backward error *across the line* exceeds ``fb_threshold`` px are dropped (the
-   component along an edge is ill-posed and irrelevant to the line). The predicted line is the
-   total-least-squares fit to the surviving points.
-2. *Detect* (every ``detect_every`` frames): :class:`~mlofc_ros.segments.detect.LineDetector`.
-3. *Associate*: a detection joins the predicted track with the lowest normalised cost among
-   those passing the gates (oriented angle, perpendicular distance both ways, overlap along the
-   line). A track may absorb several collinear fragments; they are fused by a length-weighted
-   TLS fit. Unclaimed detections start new tracks (births).
-4. Tracks without a detection coast on their KLT prediction (reported while ``report_coasting``)
-   and retire after ``max_misses`` consecutive misses or when KLT loses them.
+1. *Carry*. A track with a velocity is predicted by it (constant velocity of both endpoints)
+   and re-located on the image edges by :func:`refine_lines`: a 1D search for the gradient
+   maximum along the line's normal at a few samples, then a robust total-least-squares fit.
+   Only the position *across* the line is measured, which is all a line has (endpoints need
+   not correspond; along an edge image motion is ill-posed anyway). New tracks, and tracks
+   whose prediction finds too little edge support, are carried by pyramidal Lucas-Kanade
+   (``cv2.calcOpticalFlowPyrLK``) on ``n_points`` points, a TLS line fit to them (one outlier
+   may be dropped, turns above ``max_turn_deg`` rejected) and the same edge refinement.
+2. *Detect* on every ``detect_every``-th frame with a
+   :class:`~mlofc_ros.segments.detect.LineDetector`.
+3. *Associate*: each detection joins the track (carried, or predicted when carrying failed)
+   with the lowest normalised cost among those passing the gates (angle, distance of its
+   endpoints to the track's line, overlap along the line). A track may absorb several
+   collinear fragments, fused by a length-weighted TLS fit. Unclaimed detections start new
+   tracks; a track lying on the same line as an older one is dropped as a duplicate.
+4. A track neither carried nor detected coasts on its velocity (not reported) and retires
+   after ``max_misses`` such frames.
 
-Segments are ``(u1, v1, u2, v2)`` px in the input image, oriented like the detector's (brighter
-side on the left). Only the *line* carries over between frames; endpoints need not correspond.
+Segments are ``(u1, v1, u2, v2)`` px in the input image. A track keeps the orientation it was
+born with (the detector's: brighter side on the left).
 """
-from typing import Optional, Tuple
+from typing import Dict, Optional, Tuple
 
 import cv2
 import numpy as np
 
-from mlofc_ros.segments.detect import LineDetector
+from mlofc_ros.segments.detect import _angle_pairs, LineDetector
 
 
 def _tls_by_group(px: np.ndarray, py: np.ndarray, w: np.ndarray, g: np.ndarray, k: int,
                   sxx0: Optional[np.ndarray] = None, sxy0: Optional[np.ndarray] = None,
-                  syy0: Optional[np.ndarray] = None):
+                  syy0: Optional[np.ndarray] = None
+                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Weighted TLS line per group: centroid (k, 2), unit direction (k, 2), weight sum (k,).
 
-    Points ``(px, py)`` with weights ``w`` belong to groups ``g`` in ``[0, k)``. Optional
+    Points ``(px, py)`` px with weights ``w`` belong to groups ``g`` in ``[0, k)``. Optional
     per-point second moments (``sxx0`` ...) add the spread of a segment around its midpoint.
     """
     W = np.bincount(g, w, k)
@@ -62,163 +68,340 @@ def _tls_by_group(px: np.ndarray, py: np.ndarray, w: np.ndarray, g: np.ndarray, 
     return np.stack([cx, cy], 1), np.stack([np.cos(theta), np.sin(theta)], 1), W
 
 
+def _tls_rows(x: np.ndarray, y: np.ndarray, w: np.ndarray
+              ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted TLS line per row of (n, P) points: centroid x, y (n,), direction ux, uy (n,)."""
+    W = np.maximum(w.sum(1), 1e-12)
+    cx = (w * x).sum(1) / W
+    cy = (w * y).sum(1) / W
+    dx, dy = x - cx[:, None], y - cy[:, None]
+    sxx = (w * dx * dx).sum(1)
+    sxy = (w * dx * dy).sum(1)
+    syy = (w * dy * dy).sum(1)
+    theta = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    return cx, cy, np.cos(theta), np.sin(theta)
+
+
+def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 16, radius: int = 3,
+                 min_gradient: float = 8.0, inlier_px: float = 0.5, min_relative: float = 0.5
+                 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Re-locate lines on the image edges found along their normals (moving-edges search).
+
+    ``image`` (H, W) float32 gray, ``seg`` (T, 4) px predicted segments. At ``n_samples``
+    points along each segment the intensity is sampled at integer offsets ``-radius - 1 ..
+    radius + 1`` px along the normal; the nearest local maximum of the central-difference
+    gradient magnitude (at least ``min_gradient`` grey levels per 2 px and ``min_relative``
+    of the strongest in the window), refined to sub-pixel by a parabola, is the edge point.
+    Each line is the TLS fit to its edge points, refitted twice without points further than
+    ``inlier_px``.
+    Returns ``(segments (T, 4) float64, the predicted extent on the refitted line;
+    support (T,) share of samples that are inliers; residual (T,) px RMS of the inliers)``.
+    """
+    t_n = seg.shape[0]
+    if t_n == 0:
+        return seg.copy(), np.zeros(0), np.zeros(0)
+    x1, y1, x2, y2 = seg.T
+    length = np.maximum(np.hypot(x2 - x1, y2 - y1), 1e-9)
+    ux, uy = (x2 - x1) / length, (y2 - y1) / length
+    nx, ny = -uy, ux
+    t = (np.arange(n_samples) + 0.5) / n_samples                                # (S,)
+    offs = np.arange(-radius - 1, radius + 2, dtype=np.float64)                 # (O,)
+    px = x1[:, None] + t[None, :] * (x2 - x1)[:, None]                          # (T, S)
+    py = y1[:, None] + t[None, :] * (y2 - y1)[:, None]
+    mx = (px[..., None] + offs * nx[:, None, None]).astype(np.float32)          # (T, S, O)
+    my = (py[..., None] + offs * ny[:, None, None]).astype(np.float32)
+    o = offs.size
+    val = cv2.remap(image, mx.reshape(-1, o), my.reshape(-1, o), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE).reshape(t_n, n_samples, o)
+    g = np.abs(val[..., 2:] - val[..., :-2])                                    # (T, S, 2r+1)
+    gp = np.pad(g, ((0, 0), (0, 0), (1, 1)))
+    peak = (g >= gp[..., :-2]) & (g >= gp[..., 2:])
+    peak &= g >= np.maximum(min_gradient, min_relative * g.max(axis=2, keepdims=True))
+    k = np.arange(-radius, radius + 1)
+    score = np.where(peak, np.abs(k) - 1e-3 * g, np.inf)                        # nearest first
+    j = np.argmin(score, axis=2)                                                # (T, S)
+    valid = np.isfinite(np.take_along_axis(score, j[..., None], 2)[..., 0])
+    jc = np.clip(j, 1, 2 * radius - 1)
+    gm = np.take_along_axis(g, (jc - 1)[..., None], 2)[..., 0]
+    g0 = np.take_along_axis(g, jc[..., None], 2)[..., 0]
+    gq = np.take_along_axis(g, (jc + 1)[..., None], 2)[..., 0]
+    den = gm - 2.0 * g0 + gq
+    delta = np.where((j == jc) & (den < 0), 0.5 * (gm - gq) / np.where(den < 0, den, -1.0),
+                     0.0)
+    off = (j - radius) + np.clip(delta, -0.5, 0.5)
+    ex = px + off * nx[:, None]
+    ey = py + off * ny[:, None]
+    w = valid.astype(np.float64)
+    cx, cy, fx, fy = _tls_rows(ex, ey, w)
+    r = np.abs((ex - cx[:, None]) * fy[:, None] - (ey - cy[:, None]) * fx[:, None])
+    w = w * (r <= inlier_px)
+    cx, cy, fx, fy = _tls_rows(ex, ey, w)
+    r = np.abs((ex - cx[:, None]) * fy[:, None] - (ey - cy[:, None]) * fx[:, None])
+    w = w * (r <= inlier_px)
+    support = w.mean(axis=1)
+    rms = np.sqrt((w * r * r).sum(1) / np.maximum(w.sum(1), 1.0))
+    flip = fx * ux + fy * uy < 0
+    fx, fy = np.where(flip, -fx, fx), np.where(flip, -fy, fy)
+    ta = (x1 - cx) * fx + (y1 - cy) * fy
+    tb = (x2 - cx) * fx + (y2 - cy) * fy
+    out = np.stack([cx + ta * fx, cy + ta * fy, cx + tb * fx, cy + tb * fy], axis=1)
+    return out, support, rms
+
+
 class LineTracker:
     """Track line segments over a gray image stream with persistent ``uint32`` ids.
 
-    Parameters (pixels are full-resolution input pixels):
+    Parameters (pixels are input-image pixels):
 
-    * ``detector``: a :class:`LineDetector` (default: LSD at scale 0.5, ``min_length``).
+    * ``detector``: a :class:`LineDetector` (default: LSD at scale 0.8 with ``min_length``).
     * ``min_length``: shortest segment reported or born, px.
-    * ``max_misses``: consecutive frames without a matching detection before a track retires.
-    * ``detect_every``: run the detector every n-th frame; KLT alone carries tracks between.
-    * ``n_points``: KLT points per track; ``klt_win``/``klt_levels``: LK window and pyramid.
-    * ``fb_threshold``: max forward-backward error across the line, px.
-    * ``angle_deg``/``distance_px``: association gates (oriented angle, perpendicular offset);
-      ``min_overlap``: overlap along the line over the shorter segment's length.
-    * ``report_coasting``: also report tracks carried by KLT alone in this frame.
+    * ``max_misses``: consecutive frames a track may be neither carried nor detected.
+    * ``detect_every``: run the detector on every n-th frame (KLT carries tracks between).
+    * ``n_points``: KLT points per track; ``klt_win``: LK window, px; ``klt_levels`` /
+      ``klt_levels_predicted``: pyramid levels without / with a velocity prediction.
+    * ``residual_px``: max distance of a KLT point to the re-fitted line; ``max_turn_deg``:
+      largest rotation of a line between frames.
+    * ``refine``, ``refine_samples``, ``refine_radius``, ``refine_min_gradient``,
+      ``refine_inlier_px``, ``refine_min_relative``: the edge search of
+      :func:`refine_lines`; ``min_support``: share of its samples that must agree.
+    * ``predict``: ``'velocity'`` (default) or ``'klt'`` (KLT-carry every track, slower).
+    * ``angle_deg`` / ``distance_px`` / ``min_overlap``: association gates (angle between
+      lines, distance of detection endpoints to the track's line, overlap along the line over
+      the shorter segment's length).
     """
 
     def __init__(self, detector: Optional[LineDetector] = None, min_length: float = 20.0,
-                 max_misses: int = 2, detect_every: int = 1, n_points: int = 5,
-                 klt_win: int = 15, klt_levels: int = 3, fb_threshold: float = 1.0,
-                 angle_deg: float = 4.0, distance_px: float = 3.0, min_overlap: float = 0.3,
-                 report_coasting: bool = True, max_tracks: int = 2000) -> None:
+                 max_misses: int = 2, detect_every: int = 3, n_points: int = 4,
+                 klt_win: int = 11, klt_levels: int = 3, klt_levels_predicted: int = 1,
+                 residual_px: float = 0.75, angle_deg: float = 3.0, distance_px: float = 2.0,
+                 min_overlap: float = 0.3, refine: bool = True, refine_samples: int = 16,
+                 refine_radius: int = 3, refine_min_gradient: float = 8.0,
+                 refine_inlier_px: float = 0.5, refine_min_relative: float = 0.3,
+                 min_support: float = 0.4, predict: str = 'velocity', max_turn_deg: float = 8.0,
+                 max_tracks: int = 2000) -> None:
         if int(detect_every) < 1:
             raise ValueError(f'detect_every must be >= 1, got {detect_every}')
-        if int(n_points) < 2:
-            raise ValueError(f'n_points must be >= 2, got {n_points}')
-        self.detector = detector if detector is not None else LineDetector(min_length)
+        if int(n_points) < 3:
+            raise ValueError(f'n_points must be >= 3, got {n_points}')
+        if not min_length >= 0:
+            raise ValueError(f'min_length must be >= 0, got {min_length}')
+        self.detector = detector if detector is not None else LineDetector(
+            min_length=min_length, scale=0.8)
         self.min_length = float(min_length)
         self.max_misses = int(max_misses)
         self.detect_every = int(detect_every)
         self.n_points = int(n_points)
-        self.klt_win = (int(klt_win), int(klt_win))
+        self.klt_win = int(klt_win)
         self.klt_levels = int(klt_levels)
-        self.fb_threshold = float(fb_threshold)
+        self.klt_levels_predicted = int(klt_levels_predicted)
+        self.residual_px = float(residual_px)
         self.angle_deg = float(angle_deg)
         self.distance_px = float(distance_px)
         self.min_overlap = float(min_overlap)
-        self.report_coasting = bool(report_coasting)
         self.max_tracks = int(max_tracks)
-        self._lk = {'winSize': self.klt_win, 'maxLevel': self.klt_levels,
-                    'criteria': (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 0.03),
-                    'minEigThreshold': 1e-4}
+        self.refine = bool(refine)
+        self.refine_samples = int(refine_samples)
+        self.refine_radius = int(refine_radius)
+        self.min_support = float(min_support)
+        if predict not in ('velocity', 'klt'):
+            raise ValueError(f"predict must be 'velocity' or 'klt', got {predict!r}")
+        self.predict = predict
+        self.max_turn_deg = float(max_turn_deg)
+        self.refine_min_gradient = float(refine_min_gradient)
+        self.refine_inlier_px = float(refine_inlier_px)
+        self.refine_min_relative = float(refine_min_relative)
+        self._t = (np.arange(self.n_points) + 0.5) / self.n_points      # (P,) along segment
         self.reset()
 
     def reset(self) -> None:
         """Drop every track and the previous image; ids restart from 0."""
         self._ids = np.zeros(0, np.uint32)
-        self._seg = np.zeros((0, 4), np.float64)
+        self._seg = np.zeros((0, 4))
+        self._vel = np.zeros((0, 4))          # per-frame displacement of both endpoints, px
+        self._has_vel = np.zeros(0, bool)
         self._misses = np.zeros(0, np.int32)
         self._age = np.zeros(0, np.int32)
         self._next_id = 0
-        self._prev = None
-        self._shape = None
+        self._prev: Optional[np.ndarray] = None
+        self._shape: Optional[Tuple[int, int]] = None
         self._frame = 0
-        #: per-stage seconds of the last :meth:`update` (``detect``, ``track``)
-        self.last_timing = {'detect': 0.0, 'track': 0.0}
+        #: seconds spent in the last :meth:`update` per stage (``detect``, ``track``)
+        self.last_timing: Dict[str, float] = {'detect': 0.0, 'track': 0.0}
 
     @property
     def n_tracks(self) -> int:
         """Number of live tracks (reported or coasting)."""
         return int(self._ids.size)
 
-    # ------------------------------------------------------------------ prediction
-    def _predict(self, pyr) -> Tuple[np.ndarray, np.ndarray]:
-        """KLT-predict every live track into the new frame: (segments (T, 4), ok (T,))."""
-        t_n = self._seg.shape[0]
-        if t_n == 0 or self._prev is None:
-            return self._seg.copy(), np.zeros(t_n, bool)
-        p = self.n_points
-        s = self._seg
-        t = np.linspace(0.0, 1.0, p)
-        a, b = s[:, None, :2], s[:, None, 2:]
-        pts = (a + t[None, :, None] * (b - a)).reshape(-1, 2).astype(np.float32)
-        nxt, st1, _ = cv2.calcOpticalFlowPyrLK(self._prev, pyr, pts, None, **self._lk)
-        back, st2, _ = cv2.calcOpticalFlowPyrLK(pyr, self._prev, nxt, None, **self._lk)
-        d = s[:, 2:] - s[:, :2]
-        length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
-        u = d / length[:, None]
-        nrm = np.repeat(np.stack([-u[:, 1], u[:, 0]], 1), p, axis=0)
-        fb = np.abs(np.einsum('ij,ij->i', (back - pts).astype(np.float64), nrm))
-        ok = (st1.ravel() == 1) & (st2.ravel() == 1) & (fb <= self.fb_threshold)
+    # ------------------------------------------------------------------ carry (KLT)
+    def _lk(self, gray: np.ndarray, p0: np.ndarray, init: Optional[np.ndarray],
+            levels: int) -> Tuple[np.ndarray, np.ndarray]:
+        """LK from the previous frame: points (n, 2) float32 -> (new (n, 2), status (n,))."""
+        if p0.shape[0] == 0:
+            return p0.copy(), np.zeros(0, bool)
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 10, 0.03)
+        win = (self.klt_win, self.klt_win)
+        if init is None:
+            p1, st, _ = cv2.calcOpticalFlowPyrLK(self._prev, gray, p0, None, winSize=win,
+                                                 maxLevel=levels, criteria=crit)
+        else:
+            p1, st, _ = cv2.calcOpticalFlowPyrLK(self._prev, gray, p0, init.copy(),
+                                                 winSize=win, maxLevel=levels, criteria=crit,
+                                                 flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
+        return p1.reshape(-1, 2), st.reshape(-1).astype(bool)
+
+    def _fit(self, seg: np.ndarray, p0: np.ndarray, p1: np.ndarray, valid: np.ndarray
+             ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Re-fit lines to carried points.
+
+        ``seg`` (n, 4) previous segments, ``p0``/``p1`` (n, P, 2) points before/after, ``valid``
+        (n, P). Returns ``(new segments (n, 4), ok (n,), velocity (n, 4))``: the TLS line of
+        the points (at most one outlier dropped), spanning the old endpoints moved by the
+        points' affine-in-t displacement and projected onto it.
+        """
         h, w = self._shape
-        q = nxt.astype(np.float64)
-        ok &= (q[:, 0] >= 0) & (q[:, 0] <= w - 1) & (q[:, 1] >= 0) & (q[:, 1] <= h - 1)
-        g = np.repeat(np.arange(t_n), p)
-        gi, qi = g[ok], q[ok]
-        cnt = np.bincount(gi, minlength=t_n)
-        c, dirn, _ = _tls_by_group(qi[:, 0], qi[:, 1], np.ones(gi.size), gi, t_n)
-        # keep the old orientation
-        flip = np.einsum('ij,ij->i', dirn, u) < 0
-        dirn[flip] *= -1
-        # residual check: all surviving points within fb_threshold + 1 px of the fit line
-        r = np.abs((qi[:, 0] - c[gi, 0]) * dirn[gi, 1] - (qi[:, 1] - c[gi, 1]) * dirn[gi, 0])
-        rmax = np.zeros(t_n)
-        np.maximum.at(rmax, gi, r)
-        good = (cnt >= max(2, (p + 1) // 2)) & (rmax <= self.fb_threshold + 1.0)
-        # extent: old endpoints shifted by the mean displacement, projected on the new line
-        disp = np.zeros((t_n, 2))
-        np.add.at(disp, gi, qi - pts[ok])
-        disp /= np.maximum(cnt, 1)[:, None]
-        e1 = s[:, :2] + disp - c
-        e2 = s[:, 2:] + disp - c
-        t1 = np.einsum('ij,ij->i', e1, dirn)
-        t2 = np.einsum('ij,ij->i', e2, dirn)
-        pred = np.concatenate([c + t1[:, None] * dirn, c + t2[:, None] * dirn], axis=1)
-        pred[~good] = s[~good]
-        return pred, good
+        x, y = p1[..., 0].astype(np.float64), p1[..., 1].astype(np.float64)
+        inside = (x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)
+        wt = (valid & inside).astype(np.float64)
+        cx, cy, ux, uy = _tls_rows(x, y, wt)
+        r = np.abs((x - cx[:, None]) * uy[:, None] - (y - cy[:, None]) * ux[:, None]) * wt
+        worst = np.argmax(r, axis=1)
+        bad = r[np.arange(r.shape[0]), worst] > self.residual_px
+        wt[bad, worst[bad]] = 0.0
+        cx, cy, ux, uy = _tls_rows(x, y, wt)
+        r = np.abs((x - cx[:, None]) * uy[:, None] - (y - cy[:, None]) * ux[:, None]) * wt
+        ok = (wt.sum(1) >= self.n_points - 1) & (r.max(1) <= self.residual_px)
+        # keep the old orientation; a line turning faster than max_turn_deg is lost
+        d = seg[:, 2:] - seg[:, :2]
+        dl = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+        cos_turn = (ux * d[:, 0] + uy * d[:, 1]) / dl
+        ok &= np.abs(cos_turn) >= np.cos(np.deg2rad(self.max_turn_deg))
+        flip = cos_turn < 0
+        ux, uy = np.where(flip, -ux, ux), np.where(flip, -uy, uy)
+        # extent: old endpoints projected on the new line, slid by the median along-line
+        # displacement of the points (LK's along-edge motion is noisy, its median is not)
+        disp = (p1 - p0).astype(np.float64)
+        along = disp[..., 0] * ux[:, None] + disp[..., 1] * uy[:, None]
+        slide = (wt * along).sum(1) / np.maximum(wt.sum(1), 1.0)
+        ta = (seg[:, 0] - cx) * ux + (seg[:, 1] - cy) * uy + slide
+        tb = (seg[:, 2] - cx) * ux + (seg[:, 3] - cy) * uy + slide
+        new = np.stack([cx + ta * ux, cy + ta * uy, cx + tb * ux, cy + tb * uy], axis=1)
+        return new, ok, new - seg
+
+    def _refine(self, image: np.ndarray, seg: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Moving-edges refinement of segments (n, 4): (refined (n, 4), ok (n,))."""
+        if not self.refine:
+            return seg, np.ones(seg.shape[0], bool)
+        ref, support, _ = refine_lines(image, seg, self.refine_samples, self.refine_radius,
+                                       self.refine_min_gradient, self.refine_inlier_px,
+                                       self.refine_min_relative)
+        return ref, support >= self.min_support
+
+    def _klt(self, gray: np.ndarray, sel: np.ndarray, init: bool
+             ) -> Tuple[np.ndarray, np.ndarray]:
+        """KLT-carry tracks ``sel``: (segments (n, 4), ok (n,)).
+
+        With ``init`` the constant-velocity prediction seeds LK and ``klt_levels_predicted``
+        levels are used, else the full ``klt_levels`` pyramid from zero motion.
+        """
+        s = self._seg[sel]
+        t = self._t[None, :, None]
+        p0 = (s[:, None, :2] + t * (s[:, None, 2:] - s[:, None, :2])).astype(np.float32)
+        q0 = p0.reshape(-1, 2)
+        if init:
+            v = self._vel[sel]
+            flow = v[:, None, :2] + t * (v[:, None, 2:] - v[:, None, :2])
+            q1, st = self._lk(gray, q0, (q0 + flow.reshape(-1, 2)).astype(np.float32),
+                              self.klt_levels_predicted)
+        else:
+            q1, st = self._lk(gray, q0, None, self.klt_levels)
+        seg, ok, _ = self._fit(s, p0, q1.reshape(sel.size, -1, 2), st.reshape(sel.size, -1))
+        return seg, ok
+
+    def _carry(self, gray: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Carry every live track into the new frame: (segments (T, 4), ok (T,)).
+
+        ``predict='velocity'``: tracks with a velocity are predicted by it and refined on the
+        image edges; ``predict='klt'``: they are KLT-carried from the prediction first. Tracks
+        without a velocity, or whose first attempt fails, are KLT-carried with the full
+        pyramid. Failed tracks get their constant-velocity prediction and ``ok = False``.
+        """
+        t_n = self._seg.shape[0]
+        new = self._seg + self._vel
+        ok = np.zeros(t_n, bool)
+        if t_n == 0 or self._prev is None:
+            return new, ok
+        image = gray.astype(np.float32) if self.refine else gray
+        sel = np.nonzero(self._has_vel)[0]
+        if sel.size:
+            if self.predict == 'klt':
+                seg1, ok1 = self._klt(gray, sel, True)
+                seg1 = np.where(ok1[:, None], seg1, new[sel])
+            else:
+                seg1 = new[sel]
+            seg1, ok2 = self._refine(image, seg1)
+            ok1 = ok2 if self.predict != 'klt' else ok1 & ok2
+            new[sel[ok1]] = seg1[ok1]
+            ok[sel[ok1]] = True
+        sel = np.nonzero(~ok)[0]
+        if sel.size:
+            seg2, ok2 = self._klt(gray, sel, False)
+            ref2, ok3 = self._refine(image, seg2)
+            # a good KLT fit stands on its own where the edge search finds too little support
+            seg2 = np.where(ok3[:, None], ref2, seg2)
+            new[sel[ok2]] = seg2[ok2]
+            ok[sel[ok2]] = True
+        return new, ok
 
     # ------------------------------------------------------------------ association
-    def _associate(self, pred: np.ndarray, det: np.ndarray, predicted: np.ndarray) -> np.ndarray:
-        """Best track (index, or -1) for each detection; (D,) intp."""
-        t_n, d_n = pred.shape[0], det.shape[0]
+    def _associate(self, trk: np.ndarray, det: np.ndarray, loose: np.ndarray) -> np.ndarray:
+        """Best track index (or -1) for each detection (D,); ``loose`` (T,) widens gates x2."""
+        t_n, d_n = trk.shape[0], det.shape[0]
         if t_n == 0 or d_n == 0:
             return np.full(d_n, -1, np.intp)
-        tp1, tp2 = pred[:, :2], pred[:, 2:]
-        td = tp2 - tp1
-        tl = np.maximum(np.hypot(td[:, 0], td[:, 1]), 1e-9)
-        tu = td / tl[:, None]
-        tc = 0.5 * (tp1 + tp2)
-        dp1, dp2 = det[:, :2], det[:, 2:]
-        dd = dp2 - dp1
-        dl = np.maximum(np.hypot(dd[:, 0], dd[:, 1]), 1e-9)
-        du = dd / dl[:, None]
-        dc = 0.5 * (dp1 + dp2)
-        cosang = tu @ du.T                                               # (T, D)
-        # gates: wider for tracks without a KLT prediction
-        scale = np.where(predicted, 1.0, 3.0)[:, None]
-        cos_thr = np.cos(np.deg2rad(np.minimum(self.angle_deg * scale, 45.0)))
-        gate = cosang >= cos_thr
-        # perpendicular distance of detection endpoints to the track line, and back
-        rel = dc[None, :, :] - tc[:, None, :]                            # (T, D, 2)
-        tn = np.stack([-tu[:, 1], tu[:, 0]], 1)
-        dn = np.stack([-du[:, 1], du[:, 0]], 1)
-        dist_td = np.abs(np.einsum('tdk,tk->td', rel, tn))
-        dist_dt = np.abs(np.einsum('tdk,dk->td', rel, dn))
-        dist = np.maximum(dist_td, dist_dt)
-        gate &= dist <= self.distance_px * scale
-        # overlap along the track line, relative to the shorter segment
-        along = np.einsum('tdk,tk->td', rel, tu)                         # det centre on track
-        half_proj = 0.5 * dl[None, :] * np.abs(cosang)
-        lo = np.maximum(along - half_proj, -0.5 * tl[:, None])
-        hi = np.minimum(along + half_proj, 0.5 * tl[:, None])
+        tx1, ty1, tx2, ty2 = trk.T
+        dx1, dy1, dx2, dy2 = det.T
+        tl = np.maximum(np.hypot(tx2 - tx1, ty2 - ty1), 1e-9)
+        tux, tuy = (tx2 - tx1) / tl, (ty2 - ty1) / tl
+        dl = np.maximum(np.hypot(dx2 - dx1, dy2 - dy1), 1e-9)
+        dux, duy = (dx2 - dx1) / dl, (dy2 - dy1) / dl
+        tcx, tcy = 0.5 * (tx1 + tx2), 0.5 * (ty1 + ty2)
+        scale = np.where(loose, 2.0, 1.0)[:, None]
+        dist_thr = self.distance_px * scale
+        cosang = np.abs(tux[:, None] * dux[None, :] + tuy[:, None] * duy[None, :])   # (T, D)
+        ang_thr = np.maximum(np.deg2rad(self.angle_deg) * scale,
+                             np.arctan2(dist_thr, np.minimum(tl[:, None], dl[None, :])))
+        gate = cosang >= np.cos(ang_thr)
+        # distances of the detection endpoints to the track line
+        e1 = np.abs((dx1[None, :] - tcx[:, None]) * tuy[:, None]
+                    - (dy1[None, :] - tcy[:, None]) * tux[:, None])
+        e2 = np.abs((dx2[None, :] - tcx[:, None]) * tuy[:, None]
+                    - (dy2[None, :] - tcy[:, None]) * tux[:, None])
+        dist = np.maximum(e1, e2)
+        gate &= dist <= dist_thr
+        # overlap along the track line, over the shorter length
+        a1 = (dx1[None, :] - tcx[:, None]) * tux[:, None] + (dy1[None, :] - tcy[:, None]) \
+            * tuy[:, None]
+        a2 = (dx2[None, :] - tcx[:, None]) * tux[:, None] + (dy2[None, :] - tcy[:, None]) \
+            * tuy[:, None]
+        half = 0.5 * tl[:, None]
+        lo = np.maximum(np.minimum(a1, a2), -half)
+        hi = np.minimum(np.maximum(a1, a2), half)
         overlap = (hi - lo) / np.minimum(tl[:, None], dl[None, :])
         gate &= overlap >= self.min_overlap
-        ang = np.arccos(np.clip(cosang, -1.0, 1.0))
-        cost = dist / (self.distance_px * scale) + ang / np.deg2rad(self.angle_deg * scale) \
-            - 0.5 * np.minimum(overlap, 1.0)
+        ang = np.arccos(np.minimum(cosang, 1.0))
+        cost = dist / dist_thr + ang / ang_thr - 0.5 * np.minimum(overlap, 1.0)
         cost = np.where(gate, cost, np.inf)
         best = np.argmin(cost, axis=0)
-        best = np.where(np.isfinite(cost[best, np.arange(d_n)]), best, -1)
-        return best
+        return np.where(np.isfinite(cost[best, np.arange(d_n)]), best, -1)
 
     @staticmethod
-    def _fuse(det: np.ndarray, owner: np.ndarray, t_n: int, ref_dir: np.ndarray) -> np.ndarray:
+    def _fuse(det: np.ndarray, owner: np.ndarray, t_n: int, ref: np.ndarray) -> np.ndarray:
         """Fuse the detections (D, 4) claimed by each track into one segment per track.
 
-        ``owner`` (D,) holds track indices in ``[0, t_n)``; returns (t_n, 4): the
-        length-weighted TLS line spanning the extreme endpoint projections (rows of tracks
+        ``owner`` (D,) holds track indices in ``[0, t_n)``; ``ref`` (t_n, 4) the tracks' current
+        segments, whose orientation is kept. Returns (t_n, 4): the length-weighted TLS line of
+        the claimed detections spanning their extreme endpoint projections (rows of tracks
         without detections are meaningless).
         """
         p1, p2 = det[:, :2], det[:, 2:]
@@ -228,9 +411,8 @@ class LineTracker:
         c, u, _ = _tls_by_group(mid[:, 0], mid[:, 1], w, owner, t_n,
                                 d[:, 0] ** 2 / 12.0, d[:, 0] * d[:, 1] / 12.0,
                                 d[:, 1] ** 2 / 12.0)
-        sd = np.zeros((t_n, 2))
-        np.add.at(sd, owner, d)
-        flip = np.einsum('ij,ij->i', u, sd) < 0
+        rd = ref[:, 2:] - ref[:, :2]
+        flip = np.einsum('ij,ij->i', u, rd) < 0
         u[flip] *= -1
         pts = np.concatenate([p1, p2])
         g = np.concatenate([owner, owner])
@@ -239,16 +421,45 @@ class LineTracker:
         tmax = np.full(t_n, -np.inf)
         np.minimum.at(tmin, g, tt)
         np.maximum.at(tmax, g, tt)
+        tmin[~np.isfinite(tmin)] = 0.0
+        tmax[~np.isfinite(tmax)] = 0.0
         return np.concatenate([c + tmin[:, None] * u, c + tmax[:, None] * u], axis=1)
+
+    def _duplicates(self, seg: np.ndarray, age: np.ndarray) -> np.ndarray:
+        """Mask (T,) of tracks lying on the same line as an older (or lower-id) track."""
+        t_n = seg.shape[0]
+        dup = np.zeros(t_n, bool)
+        if t_n < 2:
+            return dup
+        x1, y1, x2, y2 = seg.T
+        length = np.maximum(np.hypot(x2 - x1, y2 - y1), 1e-9)
+        ux, uy = (x2 - x1) / length, (y2 - y1) / length
+        theta = np.mod(np.arctan2(uy, ux), np.pi)
+        width = np.full(t_n, np.deg2rad(self.angle_deg))
+        i, j = _angle_pairs(theta, width, np.pi)
+        # i is the younger one (smaller age, or same age and later index)
+        keep = (age[i] < age[j]) | ((age[i] == age[j]) & (i > j))
+        i, j = i[keep], j[keep]
+        cx, cy = 0.5 * (x1 + x2), 0.5 * (y1 + y2)
+        off = np.maximum(np.abs((x1[i] - cx[j]) * uy[j] - (y1[i] - cy[j]) * ux[j]),
+                         np.abs((x2[i] - cx[j]) * uy[j] - (y2[i] - cy[j]) * ux[j]))
+        a = (x1[i] - cx[j]) * ux[j] + (y1[i] - cy[j]) * uy[j]
+        b = (x2[i] - cx[j]) * ux[j] + (y2[i] - cy[j]) * uy[j]
+        lo = np.maximum(np.minimum(a, b), -0.5 * length[j])
+        hi = np.minimum(np.maximum(a, b), 0.5 * length[j])
+        over = (hi - lo) / np.minimum(length[i], length[j])
+        hit = (off <= 0.5 * self.distance_px) & (over >= 0.5)
+        dup[i[hit]] = True
+        return dup
 
     # ------------------------------------------------------------------ main entry
     def update(self, gray: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Process one frame ``gray`` (H, W) uint8.
 
-        Returns ``(track_ids (M,) uint32, segments (M, 4) float32)`` px of the tracks seen in
-        this frame (matched to a detection, or carried by KLT when ``report_coasting``), sorted
-        by id. Raises ``ValueError`` on a non-uint8/non-2D image or a change of image size
-        (call :meth:`reset` first).
+        Returns ``(track_ids (M,) uint32, segments (M, 4) float32)`` px of the tracks observed
+        in this frame (carried by KLT or matched to a detection), sorted by id. Raises
+        ``ValueError`` on a non-uint8/non-2D image or a change of image size (call
+        :meth:`reset` first).
         """
         if gray.ndim != 2 or gray.dtype != np.uint8:
             raise ValueError(f'expected a (H, W) uint8 gray image, got {gray.dtype} '
@@ -256,51 +467,57 @@ class LineTracker:
         if self._shape is not None and gray.shape != self._shape:
             raise ValueError(f'image size changed from {self._shape} to {gray.shape}; '
                              'reset() the tracker first')
-        t0 = cv2.getTickCount()
+        tick = cv2.getTickCount
+        t0 = tick()
         self._shape = gray.shape
-        # (cv2's Python binding cannot pass prebuilt pyramids to calcOpticalFlowPyrLK)
-        pred, predicted = self._predict(gray)
-        self._prev = gray
-        t_n = pred.shape[0]
+        seg, carried = self._carry(gray)
+        t_n = seg.shape[0]
+        vel = np.where(carried[:, None], seg - self._seg, self._vel)
         run_detect = (self._frame % self.detect_every == 0) or t_n == 0
-        t1 = cv2.getTickCount()
+        t1 = tick()
         det = self.detector.detect(gray) if run_detect else np.zeros((0, 4), np.float32)
-        t2 = cv2.getTickCount()
+        t2 = tick()
         det = det.astype(np.float64)
-        owner = self._associate(pred, det, predicted)
+        owner = self._associate(seg, det, ~carried)
         claimed = owner >= 0
         matched = np.zeros(t_n, bool)
-        new_seg = pred.copy()
         if claimed.any():
             own = owner[claimed]
             matched[own] = True
-            fused = self._fuse(det[claimed], own, t_n, pred[:, 2:] - pred[:, :2])
-            new_seg[matched] = fused[matched]
-        if run_detect:
-            misses = np.where(matched, 0, self._misses + 1)
-        else:
-            misses = np.where(predicted, self._misses, self._misses + 1)
-        alive = (matched | predicted) & (misses <= self.max_misses)
-        length = np.hypot(new_seg[:, 2] - new_seg[:, 0], new_seg[:, 3] - new_seg[:, 1])
-        alive &= length >= 0.5 * self.min_length
-        report = matched | (predicted & self.report_coasting)
-        report &= alive & (length >= self.min_length)
-        # births
+            fused = self._fuse(det[claimed], own, t_n, seg)
+            # tracks seen only by the detector: velocity from the previous segment
+            lost = matched & ~carried
+            old = self._seg
+            new_vel = fused - old
+            vel[lost] = np.where(self._has_vel[lost, None], new_vel[lost], 0.0)
+            seg[matched] = fused[matched]
+        observed = carried | matched
+        misses = np.where(observed, 0, self._misses + 1)
+        length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+        alive = (misses <= self.max_misses) & (length >= 0.5 * self.min_length)
+        has_vel = (self._has_vel | carried) & alive
+        if run_detect and alive.sum() > 1:
+            idx = np.nonzero(alive)[0]
+            alive[idx[self._duplicates(seg[idx], self._age[idx])]] = False
+        # births from unclaimed detections
         born = det[~claimed]
-        room = max(self.max_tracks - int(alive.sum()), 0)
-        born = born[:room]
+        born = born[:max(self.max_tracks - int(alive.sum()), 0)]
         nb = born.shape[0]
         new_ids = (self._next_id + np.arange(nb)).astype(np.uint32)
         self._next_id += nb
+        report = np.concatenate([(observed & (length >= self.min_length))[alive],
+                                 np.ones(nb, bool)])
         self._ids = np.concatenate([self._ids[alive], new_ids])
-        self._seg = np.concatenate([new_seg[alive], born])
+        self._seg = np.concatenate([seg[alive], born])
+        self._vel = np.concatenate([vel[alive], np.zeros((nb, 4))])
+        self._has_vel = np.concatenate([has_vel[alive], np.zeros(nb, bool)])
         self._misses = np.concatenate([misses[alive], np.zeros(nb, np.int32)]).astype(np.int32)
         self._age = np.concatenate([self._age[alive] + 1, np.zeros(nb, np.int32)])
-        rep = np.concatenate([report[alive], np.ones(nb, bool)])
+        self._prev = gray.copy()
         self._frame += 1
-        out_ids, out_seg = self._ids[rep], self._seg[rep]
+        out_ids, out_seg = self._ids[report], self._seg[report]
         order = np.argsort(out_ids, kind='stable')
-        t3 = cv2.getTickCount()
+        t3 = tick()
         f = cv2.getTickFrequency()
         self.last_timing = {'detect': (t2 - t1) / f, 'track': ((t1 - t0) + (t3 - t2)) / f}
         return out_ids[order], out_seg[order].astype(np.float32)
