@@ -21,11 +21,18 @@ Topics (relative names, remap as usual)::
     pub  ~/body_<i>/twist    geometry_msgs/TwistWithCovarianceStamped, i = 0..num_bodies-1
     pub  ~/debug_image       sensor_msgs/Image bgr8         if publish_debug_image or subscribed
 
-Every output carries the input image's header (stamp, camera optical frame). The subscription
-callback only queues the image (a bounded queue of ``queue_size`` frames that drops the stalest
-frame); a worker thread decodes, runs the pipeline and publishes, so the executor is never blocked
-by the solver and any executor (``rclpy.spin``, a MultiThreadedExecutor, ...) can host the node.
-Parameters: see :mod:`mlofc_ros.params` (``ros2 param describe /mlofc <name>``).
+Every output carries the input image's header (stamp, camera optical frame). A twist is
+published only for a body solved in that frame (finite angular velocity and covariance). Frames
+with an undecodable image or a duplicate stamp are skipped (no output, throttled warning).
+
+The subscription callback only queues the image (a bounded queue of ``queue_size`` frames that
+drops the stalest frame); a worker thread decodes, runs the pipeline and publishes, so the
+executor is never blocked by the solver and any executor (``rclpy.spin``, a
+MultiThreadedExecutor, ...) can host the node.
+Parameters: see :mod:`mlofc_ros.params` (``ros2 param describe /mlofc <name>``); all can be
+changed at run time, invalid values are rejected with the reason and the old value kept. Write
+doubles as ``-p focal_length:=500.0`` (``:=500`` is accepted too: doubles are declared with
+dynamic typing and integers converted).
 
 Run: ``ros2 run mlofc_ros mlofc_node --ros-args -r image:=/cam/image_raw -p num_bodies:=3``.
 """
