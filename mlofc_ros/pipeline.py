@@ -266,8 +266,9 @@ class Pipeline:
             estimated unless the ``focal_length`` parameter is set).
 
         Raises ``ValueError`` for an unusable image or camera (wrong shape/dtype, too large, bad
-        intrinsics, non-finite stamp). Stamp jumps and too few tracks are not errors: they are
-        reported in :attr:`FrameResult.problem`.
+        intrinsics, non-finite stamp). Stamp jumps, too few tracks and solver failures are not
+        errors: they are reported in :attr:`FrameResult.problem` (labels -1, bodies invalid).
+        An exception from the line tracker propagates after the tracks are restarted.
         """
         t0 = time.perf_counter()
         gray = self._check_image(gray)
@@ -315,7 +316,11 @@ class Pipeline:
 
         timings: Dict[str, float] = {}
         t = time.perf_counter()
-        track_ids, segments = self._tracker.update(gray)
+        try:
+            track_ids, segments = self._tracker.update(gray)
+        except Exception:
+            self._restart_tracks()      # its state may be half-updated: start clean next frame
+            raise
         track_ids = np.asarray(track_ids, dtype=np.uint32).ravel()
         segments = np.asarray(segments, dtype=np.float32).reshape(-1, 4)
         timings['detect_track'] = (time.perf_counter() - t) * 1e3
@@ -356,6 +361,8 @@ class Pipeline:
                                     init_labels=init)
             except (ValueError, NotImplementedError) as exc:
                 problems.append(f'solver: {exc}')
+            except Exception as exc:  # noqa: B902 (a solver failure must not lose the frame)
+                problems.append(f'solver failed: {type(exc).__name__}: {exc}')
         elif fill >= 2:
             problems.append('no line tracks in the window')
         timings['solve'] = (time.perf_counter() - t) * 1e3

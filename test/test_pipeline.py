@@ -267,6 +267,30 @@ def test_too_few_tracks_gives_unassigned_labels_and_invalid_bodies():
     assert 'solver' in r.problem
 
 
+def test_a_failing_solver_or_tracker_does_not_break_the_pipeline(monkeypatch):
+    import mlofc_ros.pipeline as pipeline_module
+    seq = small_sequence()
+    p = Pipeline(num_bodies=2, window=3)
+    p.process(seq.frames[0], seq.stamps[0], seq.camera)
+
+    def broken_solver(*args, **kwargs):
+        raise IndexError('boom')
+    monkeypatch.setattr(pipeline_module, 'segment_lines', broken_solver)
+    r = p.process(seq.frames[1], seq.stamps[1], seq.camera)
+    assert 'IndexError: boom' in r.problem and len(r.segments) and np.all(r.labels == -1)
+    monkeypatch.undo()
+
+    def broken_update(gray):
+        raise RuntimeError('tracker bug')
+    monkeypatch.setattr(p._tracker, 'update', broken_update)
+    with pytest.raises(RuntimeError):
+        p.process(seq.frames[2], seq.stamps[2], seq.camera)
+    assert p.window_fill == 0                                       # restarted cleanly
+    monkeypatch.undo()
+    r = p.process(seq.frames[3], seq.stamps[3], seq.camera)
+    assert r.problem is None and r.window_fill == 1
+
+
 @pytest.mark.parametrize('image, words', [
     (np.zeros((10, 10, 3), np.uint8), ['(H, W)']),
     (np.zeros((10, 10), np.float32), ['uint8']),
