@@ -111,24 +111,28 @@ def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 16, radius
     mx = (px[..., None] + offs * nx[:, None, None]).astype(np.float32)          # (T, S, O)
     my = (py[..., None] + offs * ny[:, None, None]).astype(np.float32)
     o = offs.size
-    val = cv2.remap(image, mx.reshape(-1, o), my.reshape(-1, o), cv2.INTER_LINEAR,
-                    borderMode=cv2.BORDER_REPLICATE).reshape(t_n, n_samples, o)
-    g = np.abs(val[..., 2:] - val[..., :-2])                                    # (T, S, 2r+1)
-    gp = np.pad(g, ((0, 0), (0, 0), (1, 1)))
-    peak = (g >= gp[..., :-2]) & (g >= gp[..., 2:])
-    peak &= g >= np.maximum(min_gradient, min_relative * g.max(axis=2, keepdims=True))
-    k = np.arange(-radius, radius + 1)
-    score = np.where(peak, np.abs(k) - 1e-3 * g, np.inf)                        # nearest first
-    j = np.argmin(score, axis=2)                                                # (T, S)
-    valid = np.isfinite(np.take_along_axis(score, j[..., None], 2)[..., 0])
-    jc = np.clip(j, 1, 2 * radius - 1)
-    gm = np.take_along_axis(g, (jc - 1)[..., None], 2)[..., 0]
-    g0 = np.take_along_axis(g, jc[..., None], 2)[..., 0]
-    gq = np.take_along_axis(g, (jc + 1)[..., None], 2)[..., 0]
+    n = t_n * n_samples
+    val = cv2.remap(image, mx.reshape(n, o), my.reshape(n, o), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)                          # (N, O)
+    g = np.abs(val[:, 2:] - val[:, :-2])                                        # (N, K)
+    kk = 2 * radius + 1
+    thr = np.maximum(min_gradient, min_relative * g.max(axis=1))
+    peak = g >= thr[:, None]
+    peak[:, 1:] &= g[:, 1:] >= g[:, :-1]
+    peak[:, :-1] &= g[:, :-1] >= g[:, 1:]
+    # nearest peak to the prediction (ties: the stronger)
+    score = np.where(peak, np.abs(np.arange(-radius, radius + 1)) - 1e-4 * g, np.inf)
+    j = np.argmin(score, axis=1)
+    rows = np.arange(n)
+    valid = np.isfinite(score[rows, j])
+    g0 = g[rows, j]
+    gm = g[rows, np.maximum(j - 1, 0)]
+    gq = g[rows, np.minimum(j + 1, kk - 1)]
     den = gm - 2.0 * g0 + gq
-    delta = np.where((j == jc) & (den < 0), 0.5 * (gm - gq) / np.where(den < 0, den, -1.0),
-                     0.0)
-    off = (j - radius) + np.clip(delta, -0.5, 0.5)
+    inner = (j > 0) & (j < kk - 1) & (den < 0)
+    delta = np.where(inner, 0.5 * (gm - gq) / np.where(inner, den, -1.0), 0.0)
+    off = ((j - radius) + np.clip(delta, -0.5, 0.5)).reshape(t_n, n_samples)
+    valid = valid.reshape(t_n, n_samples)
     ex = px + off * nx[:, None]
     ey = py + off * ny[:, None]
     w = valid.astype(np.float64)
@@ -225,8 +229,9 @@ class LineTracker:
         self._prev: Optional[np.ndarray] = None
         self._shape: Optional[Tuple[int, int]] = None
         self._frame = 0
-        #: seconds spent in the last :meth:`update` per stage (``detect``, ``track``)
-        self.last_timing: Dict[str, float] = {'detect': 0.0, 'track': 0.0}
+        #: seconds spent in the last :meth:`update` per stage (``detect``, ``track``), and
+        #: ``detected`` = 1.0 when the detector ran in it
+        self.last_timing: Dict[str, float] = {'detect': 0.0, 'track': 0.0, 'detected': 0.0}
 
     @property
     def n_tracks(self) -> int:
@@ -519,5 +524,6 @@ class LineTracker:
         order = np.argsort(out_ids, kind='stable')
         t3 = tick()
         f = cv2.getTickFrequency()
-        self.last_timing = {'detect': (t2 - t1) / f, 'track': ((t1 - t0) + (t3 - t2)) / f}
+        self.last_timing = {'detect': (t2 - t1) / f, 'track': ((t1 - t0) + (t3 - t2)) / f,
+                            'detected': float(run_detect)}
         return out_ids[order], out_seg[order].astype(np.float32)

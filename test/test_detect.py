@@ -1,0 +1,160 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""LineDetector: finds rendered GT edges, drops short segments, merges collinear fragments."""
+import cv2
+import numpy as np
+import pytest
+
+from mlofc_ros.segments.detect import LineDetector, merge_collinear, orient_by_polarity
+
+
+def _on_line(seg, gt, angle_deg=3.0, dist_px=2.0):
+    """(len(gt),) bool: some segment lies on each GT segment (angle, distance, overlap)."""
+    gd = gt[:, 2:] - gt[:, :2]
+    gl = np.linalg.norm(gd, axis=1)
+    gu = gd / gl[:, None]
+    gn = np.stack([-gu[:, 1], gu[:, 0]], 1)
+    hit = np.zeros(len(gt), bool)
+    for s in seg.astype(np.float64):
+        d = s[2:] - s[:2]
+        u = d / np.linalg.norm(d)
+        cos = np.abs(gu @ u)
+        e1 = np.abs(np.einsum('ij,ij->i', s[:2] - gt[:, :2], gn))
+        e2 = np.abs(np.einsum('ij,ij->i', s[2:] - gt[:, :2], gn))
+        t1 = np.einsum('ij,ij->i', s[:2] - gt[:, :2], gu)
+        t2 = np.einsum('ij,ij->i', s[2:] - gt[:, :2], gu)
+        lo = np.clip(np.minimum(t1, t2), 0, gl)
+        hi = np.clip(np.maximum(t1, t2), 0, gl)
+        ok = (cos >= np.cos(np.deg2rad(angle_deg))) & (np.maximum(e1, e2) <= dist_px) \
+            & ((hi - lo) >= 0.5 * np.linalg.norm(d))
+        hit |= ok
+    return hit
+
+
+def test_detects_rendered_gt_edges():
+    render = pytest.importorskip('mlofc_ros.render')
+    seq = render.render_sequence(n_boxes=2, n_frames=1, size=(640, 480), seed=0)
+    truth = seq.truth[0]
+    det = LineDetector(min_length=20.0)
+    seg = det.detect(seq.frames[0])
+    assert seg.dtype == np.float32 and seg.ndim == 2 and seg.shape[1] == 4
+    gl = np.linalg.norm(truth.segments[:, 2:] - truth.segments[:, :2], axis=1)
+    # long, mostly visible GT edges (the GT segment is the longest visible part)
+    sel = (gl >= 40) & (truth.visible_fraction >= 0.9)
+    recall = _on_line(seg, truth.segments[sel]).mean()
+    assert recall >= 0.9, recall
+    assert np.all(np.linalg.norm(seg[:, 2:] - seg[:, :2], axis=1) >= 20.0)
+
+
+def test_rejects_short_segments_and_keeps_long():
+    img = np.full((240, 320), 40, np.uint8)
+    cv2.rectangle(img, (60, 60), (260, 180), 200, -1)       # 200 x 120 px edges
+    cv2.rectangle(img, (20, 200), (30, 230), 200, -1)       # 10 x 30 px blob
+    img = cv2.GaussianBlur(img, (5, 5), 1.0)
+    for min_length in (20.0, 40.0):
+        seg = LineDetector(min_length=min_length).detect(img)
+        length = np.linalg.norm(seg[:, 2:] - seg[:, :2], axis=1)
+        assert np.all(length >= min_length)
+        rect = np.array([[60, 60, 260, 60], [260, 60, 260, 180], [260, 180, 60, 180],
+                         [60, 180, 60, 60]], float)
+        assert _on_line(seg, rect, dist_px=1.0).all()
+    # the blob's 11 px sides are gone with a 20 px floor, its 31 px sides stay
+    seg = LineDetector(min_length=20.0).detect(img)
+    blob = (seg[:, [0, 2]].max(1) < 45) & (seg[:, [1, 3]].min(1) > 190)
+    assert blob.sum() == 2
+
+
+def test_scaled_backends_locate_edges_subpixel():
+    # a supersampled step edge at u = 100.25 and v = 120.75 (pixel centres at integers)
+    big = np.full((480 * 8, 640 * 8), 50, np.uint8)
+    big[int((120.75 + 0.5) * 8):int((300.5 + 0.5) * 8),
+        int((100.25 + 0.5) * 8):int((400.5 + 0.5) * 8)] = 200
+    img = cv2.resize(big, (640, 480), interpolation=cv2.INTER_AREA)
+    for backend, scale in (('lsd', 0.8), ('lsd', 0.5), ('lsd_resize', 0.5)):
+        seg = LineDetector(backend=backend, scale=scale).detect(img)
+        vert = np.abs(seg[:, 0] - seg[:, 2]) < 1
+        left = seg[vert & (seg[:, 0] < 200)]
+        assert left.shape[0] == 1, (backend, scale, seg)
+        assert abs(left[0, 0] - 100.25) < 0.25, (backend, scale, left)
+        horiz = np.abs(seg[:, 1] - seg[:, 3]) < 1
+        top = seg[horiz & (seg[:, 1] < 200)]
+        assert abs(top[0, 1] - 120.75) < 0.25, (backend, scale, top)
+
+
+def test_orientation_brighter_on_the_left():
+    img = np.full((200, 200), 30, np.uint8)
+    img[:, 100:] = 220                      # bright right half: vertical edge at u = 99.5
+    seg = LineDetector(min_length=20.0).detect(img)
+    assert seg.shape[0] == 1
+    # walking along (du, dv), the left side (dv, -du) must be the bright one (u > 100)
+    d = seg[0, 2:] - seg[0, :2]
+    assert d[1] > 0                          # walking down the image (v down), left is +u
+    flipped = orient_by_polarity(img, seg[:, [2, 3, 0, 1]])
+    np.testing.assert_allclose(flipped, seg)
+
+
+def test_merge_joins_collinear_fragments():
+    frags = np.array([[0, 0, 50, 0.2], [55, 0.3, 100, 0.4], [103, 0.5, 140, 0.6],
+                      [0, 10, 50, 10],              # parallel, 10 px away: separate
+                      [60, 20, 60, 80],             # perpendicular: separate
+                      [200, 0.5, 240, 0.5]],        # collinear but 60 px gap: separate
+                     np.float32)
+    out = merge_collinear(frags, gap_px=10.0)
+    assert out.shape == (4, 4)
+    long_ = out[np.argmax(np.linalg.norm(out[:, 2:] - out[:, :2], axis=1))]
+    assert long_[0] == pytest.approx(0.0, abs=0.3) and long_[2] == pytest.approx(140, abs=0.3)
+    assert abs(long_[1]) < 0.3 and abs(long_[3] - 0.6) < 0.3
+
+
+def test_merge_orientation_and_short_fragments():
+    # opposite polarity pieces of one line (e.g. stripes crossing it) join unless oriented
+    frags = np.array([[0, 0, 40, 0], [80, 0, 45, 0]], np.float32)
+    assert merge_collinear(frags).shape == (1, 4)
+    assert merge_collinear(frags, oriented=True).shape == (2, 4)
+    merged = merge_collinear(np.array([[0, 0, 40, 0], [70, 0, 45, 0], [50, 0, 30, 0]],
+                                      np.float32))
+    assert merged.shape == (1, 4)
+    assert merged[0, 0] > merged[0, 2]       # majority (by length) runs right to left
+    # short noisy fragments along one line (angles differ by > 2 deg) still join
+    frags = np.array([[458.5, 46.9, 476.5, 45.6], [478.5, 45.2, 489.5, 44.8],
+                      [495.5, 44.1, 513.5, 42.7]], np.float32)
+    assert merge_collinear(frags).shape == (1, 4)
+
+
+def test_merge_is_vectorised_for_many_segments():
+    rng = np.random.default_rng(1)
+    p = rng.uniform(0, 600, (600, 2))
+    a = rng.uniform(0, np.pi, 600)
+    seg = np.c_[p, p + 15 * np.c_[np.cos(a), np.sin(a)]].astype(np.float32)
+    out = merge_collinear(seg)
+    assert 0 < out.shape[0] <= 600
+
+
+def test_bad_input_raises():
+    det = LineDetector()
+    with pytest.raises(ValueError):
+        det.detect(np.zeros((10, 10, 3), np.uint8))
+    with pytest.raises(ValueError):
+        det.detect(np.zeros((10, 10), np.float32))
+    with pytest.raises(ValueError):
+        LineDetector(scale=0.0)
+    with pytest.raises(ValueError):
+        LineDetector(backend='nope')
+
+
+def test_callable_backend():
+    fixed = np.array([[0, 0, 30, 0], [0, 0, 5, 0]], np.float32)
+    det = LineDetector(backend=lambda g: fixed, orient=False, merge=False)
+    out = det.detect(np.zeros((50, 50), np.uint8))
+    np.testing.assert_allclose(out, fixed[:1])
