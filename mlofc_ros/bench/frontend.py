@@ -47,9 +47,9 @@ def match_to_truth(seg: np.ndarray, gt: np.ndarray, angle_deg: float = 3.0,
     A segment lies on a GT segment when their (unoriented) directions differ by less than
     ``angle_deg``, at least ``min_overlap`` of the segment's length projects inside the GT
     segment, and both endpoints of the overlapping part are within ``dist_px`` of the GT line.
-    With ``visible_fraction`` (L,), each GT segment (the longest visible part of its 3D edge)
-    is first extended on both sides by its invisible share, so that a segment on another
-    visible part of the same 3D edge still counts.
+    With ``visible_fraction`` (L,), GT segments of partly hidden edges (fraction < 0.95; the
+    GT segment is only the longest visible part) are extended along their line by 4 lengths
+    each way, so that a segment on another visible part of the same 3D edge still counts.
     Returns ``(gt_index (M,) intp, -1 when none; line_error (M,) px, the mean distance of the
     overlapping part's endpoints to the GT line; endpoint_error (M,) px, the mean distance of
     each segment endpoint to the nearer GT endpoint)``; errors are NaN for unmatched segments.
@@ -63,8 +63,10 @@ def match_to_truth(seg: np.ndarray, gt: np.ndarray, angle_deg: float = 3.0,
     s = seg.astype(np.float64)
     g = gt.astype(np.float64).copy()
     if visible_fraction is not None:
-        vf = np.clip(np.asarray(visible_fraction, dtype=np.float64), 0.05, 1.0)
-        ext = (1.0 / vf - 1.0)[:, None] * (g[:, 2:] - g[:, :2])
+        # partly hidden edges: any visible part of the 3D edge counts, i.e. its whole line
+        # within the image (the GT segment is only the longest visible part)
+        vf = np.asarray(visible_fraction, dtype=np.float64)
+        ext = np.where(vf < 0.95, 4.0, 0.0)[:, None] * (g[:, 2:] - g[:, :2])
         g = np.concatenate([g[:, :2] - ext, g[:, 2:] + ext], axis=1)
     gd = g[:, 2:] - g[:, :2]
     gl = np.maximum(np.hypot(gd[:, 0], gd[:, 1]), 1e-9)

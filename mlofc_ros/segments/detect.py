@@ -227,9 +227,9 @@ class LineDetector:
     Segments shorter than ``min_length`` px (full-resolution pixels) are dropped after merging.
     """
 
-    def __init__(self, min_length: float = 20.0, scale: float = 0.8, backend: Backend = 'lsd',
-                 merge: bool = True, merge_angle_deg: float = 2.0, merge_offset_px: float = 1.5,
-                 merge_gap_px: float = 10.0, merge_oriented: bool = False, orient: bool = True,
+    def __init__(self, min_length: float = 20.0, scale: float = 1.0, backend: Backend = 'lsd',
+                 merge: bool = True, merge_angle_deg: float = 2.0, merge_offset_px: float = 2.0,
+                 merge_gap_px: float = 15.0, merge_oriented: bool = False, orient: bool = True,
                  refine: bool = True) -> None:
         if not min_length >= 0:
             raise ValueError(f'min_length must be >= 0, got {min_length}')

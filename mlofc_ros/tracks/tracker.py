@@ -82,8 +82,18 @@ def _tls_rows(x: np.ndarray, y: np.ndarray, w: np.ndarray
     return cx, cy, np.cos(theta), np.sin(theta)
 
 
-def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 16, radius: int = 3,
-                 min_gradient: float = 8.0, inlier_px: float = 0.5, min_relative: float = 0.5
+def _row_median(vals: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Median of each row of (n, k) ``vals`` over its ``valid`` entries (NaN when none)."""
+    v = np.sort(np.where(valid, vals, np.inf), axis=1)
+    cnt = valid.sum(axis=1)
+    rows = np.arange(v.shape[0])
+    lo = v[rows, np.maximum((cnt - 1) // 2, 0)]
+    hi = v[rows, np.maximum(cnt // 2, 0)]
+    return np.where(cnt > 0, 0.5 * (lo + hi), np.nan)
+
+
+def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 12, radius: int = 3,
+                 min_gradient: float = 8.0, inlier_px: float = 0.5, min_relative: float = 0.3
                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Re-locate lines on the image edges found along their normals (moving-edges search).
 
@@ -92,8 +102,9 @@ def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 16, radius
     radius + 1`` px along the normal; the nearest local maximum of the central-difference
     gradient magnitude (at least ``min_gradient`` grey levels per 2 px and ``min_relative``
     of the strongest in the window), refined to sub-pixel by a parabola, is the edge point.
-    Each line is the TLS fit to its edge points, refitted twice without points further than
-    ``inlier_px``.
+    Each line is the TLS fit to the edge points within ``inlier_px`` of a robust start (the
+    line through the median offsets of the two halves of the samples), refitted once without
+    points further than ``inlier_px``.
     Returns ``(segments (T, 4) float64, the predicted extent on the refitted line;
     support (T,) share of samples that are inliers; residual (T,) px RMS of the inliers)``.
     """
@@ -135,10 +146,16 @@ def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 16, radius
     valid = valid.reshape(t_n, n_samples)
     ex = px + off * nx[:, None]
     ey = py + off * ny[:, None]
-    w = valid.astype(np.float64)
-    cx, cy, fx, fy = _tls_rows(ex, ey, w)
-    r = np.abs((ex - cx[:, None]) * fy[:, None] - (ey - cy[:, None]) * fx[:, None])
-    w = w * (r <= inlier_px)
+    # robust start: the line through the median offsets of the two halves (resists a
+    # neighbouring edge caught by up to half of the samples of each half)
+    half = n_samples // 2
+    m1 = _row_median(off[:, :half], valid[:, :half])
+    m2 = _row_median(off[:, half:], valid[:, half:])
+    t1, t2 = t[:half].mean(), t[half:].mean()
+    m1 = np.where(np.isfinite(m1), m1, m2)
+    m2 = np.where(np.isfinite(m2), m2, m1)
+    guess = m1[:, None] + (m2 - m1)[:, None] * (t[None, :] - t1) / (t2 - t1)
+    w = (valid & (np.abs(off - guess) <= inlier_px)).astype(np.float64)
     cx, cy, fx, fy = _tls_rows(ex, ey, w)
     r = np.abs((ex - cx[:, None]) * fy[:, None] - (ey - cy[:, None]) * fx[:, None])
     w = w * (r <= inlier_px)
@@ -157,12 +174,14 @@ class LineTracker:
 
     Parameters (pixels are input-image pixels):
 
-    * ``detector``: a :class:`LineDetector` (default: LSD at scale 0.8 with ``min_length``).
+    * ``detector``: a :class:`LineDetector` (default: its defaults, LSD at full resolution,
+      with ``min_length``).
     * ``min_length``: shortest segment reported or born, px.
     * ``max_misses``: consecutive frames a track may be neither carried nor detected.
     * ``detect_every``: run the detector on every n-th frame (KLT carries tracks between).
-    * ``n_points``: KLT points per track; ``klt_win``: LK window, px; ``klt_levels`` /
-      ``klt_levels_predicted``: pyramid levels without / with a velocity prediction.
+    * ``n_points``: KLT points per track; ``klt_win``: LK window, px of the LK image, which is
+      the input resized by ``klt_scale``; ``klt_levels`` / ``klt_levels_predicted``: pyramid
+      levels without / with a velocity prediction.
     * ``residual_px``: max distance of a KLT point to the re-fitted line; ``max_turn_deg``:
       largest rotation of a line between frames.
     * ``refine``, ``refine_samples``, ``refine_radius``, ``refine_min_gradient``,
@@ -175,10 +194,11 @@ class LineTracker:
     """
 
     def __init__(self, detector: Optional[LineDetector] = None, min_length: float = 20.0,
-                 max_misses: int = 2, detect_every: int = 3, n_points: int = 4,
-                 klt_win: int = 11, klt_levels: int = 3, klt_levels_predicted: int = 1,
+                 max_misses: int = 2, detect_every: int = 4, n_points: int = 4,
+                 klt_win: int = 9, klt_levels: int = 3, klt_levels_predicted: int = 1,
+                 klt_scale: float = 0.5,
                  residual_px: float = 0.75, angle_deg: float = 3.0, distance_px: float = 2.0,
-                 min_overlap: float = 0.3, refine: bool = True, refine_samples: int = 16,
+                 min_overlap: float = 0.3, refine: bool = True, refine_samples: int = 12,
                  refine_radius: int = 3, refine_min_gradient: float = 8.0,
                  refine_inlier_px: float = 0.5, refine_min_relative: float = 0.3,
                  min_support: float = 0.4, predict: str = 'velocity', max_turn_deg: float = 8.0,
@@ -190,7 +210,7 @@ class LineTracker:
         if not min_length >= 0:
             raise ValueError(f'min_length must be >= 0, got {min_length}')
         self.detector = detector if detector is not None else LineDetector(
-            min_length=min_length, scale=0.8)
+            min_length=min_length)
         self.min_length = float(min_length)
         self.max_misses = int(max_misses)
         self.detect_every = int(detect_every)
@@ -198,6 +218,9 @@ class LineTracker:
         self.klt_win = int(klt_win)
         self.klt_levels = int(klt_levels)
         self.klt_levels_predicted = int(klt_levels_predicted)
+        if not 0.0 < klt_scale <= 1.0:
+            raise ValueError(f'klt_scale must be in (0, 1], got {klt_scale}')
+        self.klt_scale = float(klt_scale)
         self.residual_px = float(residual_px)
         self.angle_deg = float(angle_deg)
         self.distance_px = float(distance_px)
@@ -227,6 +250,9 @@ class LineTracker:
         self._age = np.zeros(0, np.int32)
         self._next_id = 0
         self._prev: Optional[np.ndarray] = None
+        self._cur: Optional[np.ndarray] = None
+        self._small_prev: Optional[np.ndarray] = None
+        self._small_cur: Optional[np.ndarray] = None
         self._shape: Optional[Tuple[int, int]] = None
         self._frame = 0
         #: seconds spent in the last :meth:`update` per stage (``detect``, ``track``), and
@@ -239,21 +265,46 @@ class LineTracker:
         return int(self._ids.size)
 
     # ------------------------------------------------------------------ carry (KLT)
+    def _small(self, which: str) -> np.ndarray:
+        """Return the previous (``'prev'``) or current (``'cur'``) image at ``klt_scale``."""
+        key = '_small_' + which
+        img = getattr(self, key)
+        if img is None:
+            full = self._prev if which == 'prev' else self._cur
+            img = cv2.resize(full, None, fx=self.klt_scale, fy=self.klt_scale,
+                             interpolation=cv2.INTER_AREA)
+            setattr(self, key, img)
+        return img
+
     def _lk(self, gray: np.ndarray, p0: np.ndarray, init: Optional[np.ndarray],
             levels: int) -> Tuple[np.ndarray, np.ndarray]:
-        """LK from the previous frame: points (n, 2) float32 -> (new (n, 2), status (n,))."""
+        """LK from the previous frame: points (n, 2) float32 -> (new (n, 2), status (n,)).
+
+        Runs on the images resized by ``klt_scale`` (pixel centres mapped exactly); the edge
+        refinement restores full-resolution accuracy afterwards.
+        """
         if p0.shape[0] == 0:
             return p0.copy(), np.zeros(0, bool)
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 10, 0.03)
         win = (self.klt_win, self.klt_win)
+        f = self.klt_scale
+        if f != 1.0:
+            prev, cur = self._small('prev'), self._small('cur')
+            p0 = ((p0 + 0.5) * f - 0.5).astype(np.float32)
+            init = None if init is None else ((init + 0.5) * f - 0.5).astype(np.float32)
+        else:
+            prev, cur = self._prev, gray
         if init is None:
-            p1, st, _ = cv2.calcOpticalFlowPyrLK(self._prev, gray, p0, None, winSize=win,
+            p1, st, _ = cv2.calcOpticalFlowPyrLK(prev, cur, p0, None, winSize=win,
                                                  maxLevel=levels, criteria=crit)
         else:
-            p1, st, _ = cv2.calcOpticalFlowPyrLK(self._prev, gray, p0, init.copy(),
-                                                 winSize=win, maxLevel=levels, criteria=crit,
+            p1, st, _ = cv2.calcOpticalFlowPyrLK(prev, cur, p0, init.copy(), winSize=win,
+                                                 maxLevel=levels, criteria=crit,
                                                  flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
-        return p1.reshape(-1, 2), st.reshape(-1).astype(bool)
+        p1 = p1.reshape(-1, 2)
+        if f != 1.0:
+            p1 = (p1 + 0.5) / f - 0.5
+        return p1, st.reshape(-1).astype(bool)
 
     def _fit(self, seg: np.ndarray, p0: np.ndarray, p1: np.ndarray, valid: np.ndarray
              ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -475,6 +526,7 @@ class LineTracker:
         tick = cv2.getTickCount
         t0 = tick()
         self._shape = gray.shape
+        self._cur, self._small_cur = gray, None
         seg, carried = self._carry(gray)
         t_n = seg.shape[0]
         vel = np.where(carried[:, None], seg - self._seg, self._vel)
@@ -519,6 +571,8 @@ class LineTracker:
         self._misses = np.concatenate([misses[alive], np.zeros(nb, np.int32)]).astype(np.int32)
         self._age = np.concatenate([self._age[alive] + 1, np.zeros(nb, np.int32)])
         self._prev = gray.copy()
+        self._small_prev = self._small_cur
+        self._cur = self._small_cur = None
         self._frame += 1
         out_ids, out_seg = self._ids[report], self._seg[report]
         order = np.argsort(out_ids, kind='stable')
