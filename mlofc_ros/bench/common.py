@@ -22,6 +22,7 @@ import os
 import pathlib
 import platform
 import shlex
+import subprocess
 import sys
 import time
 from typing import Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
@@ -66,6 +67,23 @@ def run_header(title: str, command: str, extra: Optional[Mapping[str, str]] = No
         lines.append(f'- {key}: {val}')
     lines.append('')
     return '\n'.join(lines)
+
+
+def git_revision(*paths: str) -> str:
+    """Short hash of the last commit touching ``paths`` (repo-relative), ``+dirty`` if edited.
+
+    Returns ``'unknown'`` outside a git checkout.
+    """
+    root = REPO_RESULTS_DIR.parents[1]
+    try:
+        rev = subprocess.run(['git', 'log', '-1', '--format=%h', '--', *paths], cwd=root,
+                             capture_output=True, text=True, timeout=10, check=True).stdout
+        dirty = subprocess.run(['git', 'status', '--porcelain', '--', *paths], cwd=root,
+                               capture_output=True, text=True, timeout=10, check=True).stdout
+    except (OSError, subprocess.SubprocessError):
+        return 'unknown'
+    rev = rev.strip() or 'unknown'
+    return rev + ('+dirty' if dirty.strip() else '')
 
 
 def format_number(x: object, digits: int = 3) -> str:

@@ -26,7 +26,9 @@ prints the tables.
 Every point runs the same ``--trials`` scenes (fixed seeds) through every method of
 :data:`mlofc_ros.solver.METHODS` with known intrinsics, through the two floors (every line
 assigned with the TRUE motions: the paper's unweighted residual, and the noise-weighted one), with
-two views as in the paper; then the robust method and the floors with ``K = --frames`` views; and,
+two views as in the paper; then the multi-frame methods (:data:`MULTI_FRAME_METHODS`: 'robust',
+and 'general', which also fits translation from three or more views) and the floors with
+``K = --frames`` views; and,
 at Fig. 2 settings, the robust and algebraic methods with unknown focal length.
 """
 import argparse
@@ -49,7 +51,13 @@ NOISE_GRID = (0.0, 0.5, 1.0, 1.5, 2.0)
 TRANSLATION_GRID = (0.0, 1.0, 2.0, 4.0, 8.0)
 QUICK_NOISE_GRID = (0.0, 1.0)
 QUICK_TRANSLATION_GRID = (0.0, 8.0)
-COLORS = {'algebraic': 'C0', 'kmeans': 'C1', 'algebraic+kmeans': 'C2', 'robust': 'C3'}
+COLORS = {'algebraic': 'C0', 'kmeans': 'C1', 'algebraic+kmeans': 'C2', 'robust': 'C3',
+          'general': 'C4'}
+#: Methods also run on the multi-frame (K > 2) scenes.
+MULTI_FRAME_METHODS = ('robust', 'general')
+#: Multi-frame methods run on the K-view scenes of the translation experiments only (Fig. 3, 4):
+#: 'general' fits translation too and costs ~1-2 s per call, the budget of the whole benchmark.
+TRANSLATION_ONLY_METHODS = ('general',)
 
 
 @dataclass(frozen=True)
@@ -107,10 +115,16 @@ class Unit:
     runners: Tuple[str, ...]
 
 
-def runner_names(exp: Experiment, n_frames: int, methods: Sequence[str]) -> Tuple[str, ...]:
-    """Names of what runs on a scene: methods, floors and (Fig. 2, two views) f-unknown runs."""
+def runner_names(exp: Experiment, n_frames: int, methods: Sequence[str],
+                 multi: Sequence[str] = MULTI_FRAME_METHODS) -> Tuple[str, ...]:
+    """Names of what runs on a scene: methods, floors and (Fig. 2, two views) f-unknown runs.
+
+    ``methods`` run on two-view scenes, those of them also in ``multi`` on K-view scenes.
+    """
     if n_frames > 2:
-        return tuple(m for m in methods if m == 'robust') + (FLOOR, FLOOR_W)
+        return tuple(m for m in methods if m in multi and (
+            exp.sweep == 'translation_ratio' or m not in TRANSLATION_ONLY_METHODS)
+        ) + (FLOOR, FLOOR_W)
     names = tuple(methods) + (FLOOR, FLOOR_W)
     if exp.key == 'fig2':
         names += tuple(f'{m} (f unknown)' for m in F_UNKNOWN_METHODS if m in methods)
@@ -141,7 +155,7 @@ def run_unit(unit: Unit) -> Tuple[Unit, Dict[str, Dict[str, object]]]:
                        seed=unit.seed, **exp.scene_kwargs(exp.xs[unit.point]))
     out: Dict[str, Dict[str, object]] = {}
     for name in unit.runners:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             if name in (FLOOR, FLOOR_W):
                 res = assign_with_motions(scene.tracks, scene.angular_velocities,
@@ -162,19 +176,21 @@ def run_unit(unit: Unit) -> Tuple[Unit, Dict[str, Dict[str, object]]]:
                    'f_err': math.nan, 'unassigned': 1.0, 'failed': 1,
                    'error': f'{type(exc).__name__}: {exc}'}
         rec['seconds'] = time.perf_counter() - t0
+        rec['cpu_seconds'] = time.process_time() - c0
         out[name] = rec
     return unit, out
 
 
 def make_units(exps: Sequence[Experiment], methods: Sequence[str], trials: int,
-               extra_frames: int, seed: int) -> List[Unit]:
+               extra_frames: int, seed: int,
+               multi: Sequence[str] = MULTI_FRAME_METHODS) -> List[Unit]:
     """All scenes of the run; seeds depend only on (seed, experiment, K, point, trial)."""
     units = []
     frames = (2,) + ((extra_frames,) if extra_frames > 2 else ())
     for ei, exp in enumerate(exps):
         fig_no = int(exp.key[3:])
         for k in frames:
-            names = runner_names(exp, k, methods)
+            names = runner_names(exp, k, methods, multi)
             for j in range(len(exp.xs)):
                 for i in range(trials):
                     ss = np.random.SeedSequence([seed, fig_no, k, j, i])
@@ -199,8 +215,8 @@ def aggregate(results: Sequence[Tuple[Unit, Dict[str, Dict[str, object]]]]
     stats = {}
     for key, recs in raw.items():
         col = {f: np.array([float(r[f]) for r in recs]) for f in
-               ('miscl', 'rel', 'abs_deg', 'last_deg', 'f_err', 'seconds', 'unassigned',
-                'failed')}
+               ('miscl', 'rel', 'abs_deg', 'last_deg', 'f_err', 'seconds', 'cpu_seconds',
+                'unassigned', 'failed')}
         stats[key] = {
             'miscl_mean': 100 * float(col['miscl'].mean()),
             'miscl_median': 100 * float(np.median(col['miscl'])),
@@ -211,6 +227,8 @@ def aggregate(results: Sequence[Tuple[Unit, Dict[str, Dict[str, object]]]]
             'f_err_mean': 100 * common.summarize(col['f_err'])['mean'],
             'f_err_median': 100 * common.summarize(col['f_err'])['median'],
             'ms_median': 1000 * float(np.median(col['seconds'])),
+            'cpu_ms_median': 1000 * float(np.median(col['cpu_seconds'])),
+            'cpu_total': float(col['cpu_seconds'].sum()),
             'unassigned': 100 * float(col['unassigned'].mean()),
             'failed': int(col['failed'].sum()),
             'trials': len(recs),
@@ -225,6 +243,12 @@ def _cell_miscl(s: Optional[Dict[str, float]]) -> str:
     if s['failed']:
         txt += f" [{s['failed']} fail]"
     return txt
+
+
+def _cell_rel(s: Optional[Dict[str, float]]) -> str:
+    if s is None:
+        return '—'
+    return f"{_fmt(s['rel_mean'])} ({_fmt(s['rel_median'])})"
 
 
 def _x_headers(exp: Experiment) -> List[str]:
@@ -246,18 +270,35 @@ def _fmt(value: float, digits: int = 2) -> str:
     return '—' if not math.isfinite(value) else f'{value:.{digits}f}'
 
 
+def _unassigned_table(exp: Experiment, stats: Dict[Key, Dict[str, float]],
+                      methods: Sequence[str], extra_frames: int, multi: Sequence[str]) -> str:
+    """Rows (runner, K) that left any line unassigned (-1) at some point; '' if none did."""
+    frames = [2] + ([extra_frames] if extra_frames > 2 else [])
+    rows = []
+    for k in frames:
+        for name in runner_names(exp, k, methods, multi):
+            vals = [stats.get((exp.key, k, name, j)) for j in range(len(exp.xs))]
+            if any(v is not None and v['unassigned'] > 0 for v in vals):
+                rows.append([f'{name}, K={k}'] + ['—' if v is None else _fmt(v['unassigned'], 1)
+                                                  for v in vals])
+    return common.markdown_table(['method'] + _x_headers(exp), rows) if rows else ''
+
+
 def figure_section(exp: Experiment, stats: Dict[Key, Dict[str, float]], methods: Sequence[str],
-                   extra_frames: int) -> str:
+                   extra_frames: int, multi: Sequence[str] = MULTI_FRAME_METHODS) -> str:
     """Markdown section of one experiment: misclassification, motion error, K-frame tables."""
     names2 = runner_names(exp, 2, methods)
     parts = [f'## {exp.title}', '']
     parts += ['Misclassification %, mean (median) over trials, two views:', '',
               _table(exp, stats, 2, names2, _cell_miscl)]
     motion_names = [n for n in names2 if not n.startswith('floor')]
-    parts += ['Relative angular-velocity error % (mean over trials of the mean over rotating '
-              'bodies of |w_est - w_true| / |w_true|), two views:', '',
-              _table(exp, stats, 2, motion_names,
-                     lambda s: '—' if s is None else _fmt(s['rel_mean']))]
+    parts += ['Relative angular-velocity error %, mean (median) over trials of the mean over '
+              'rotating bodies of |w_est - w_true| / |w_true|, two views:', '',
+              _table(exp, stats, 2, motion_names, _cell_rel)]
+    unassigned = _unassigned_table(exp, stats, methods, extra_frames, multi)
+    if unassigned:
+        parts += ['Of which unassigned (label -1, rejected as outliers), % of lines, mean:', '',
+                  unassigned]
     if exp.pure_translation_body:
         parts += ['Error |w_est| of the pure-translation body (deg/frame; its true w = 0), '
                   'two views:', '',
@@ -270,7 +311,7 @@ def figure_section(exp: Experiment, stats: Dict[Key, Dict[str, float]], methods:
                          lambda s: '—' if s is None else
                          f"{_fmt(s['f_err_mean'])} ({_fmt(s['f_err_median'])})")]
     if extra_frames > 2:
-        namesk = runner_names(exp, extra_frames, methods)
+        namesk = runner_names(exp, extra_frames, methods, multi)
         rows = []
         for name in namesk:
             rows.append([f'{name}, K={extra_frames}'] + [
@@ -282,15 +323,17 @@ def figure_section(exp: Experiment, stats: Dict[Key, Dict[str, float]], methods:
         parts += [f'Misclassification %, mean (median), {extra_frames} views (constant motion; '
                   f'each line gives {2 * (extra_frames - 1)} rows):', '',
                   common.markdown_table(['method'] + _x_headers(exp), rows)]
-        if 'robust' in methods:
-            parts += [f'Relative angular-velocity error %, robust, {extra_frames} views:', '',
-                      _table(exp, stats, extra_frames, ['robust'],
-                             lambda s: '—' if s is None else _fmt(s['rel_mean']))]
+        run_multi = [m for m in runner_names(exp, extra_frames, methods, multi)
+                     if not m.startswith('floor')]
+        if run_multi:
+            parts += [f'Relative angular-velocity error %, mean (median), {extra_frames} views:',
+                      '', _table(exp, stats, extra_frames, run_multi, _cell_rel)]
     return '\n'.join(parts)
 
 
 def headline(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
-             methods: Sequence[str], extra_frames: int) -> str:
+             methods: Sequence[str], extra_frames: int,
+             multi: Sequence[str] = MULTI_FRAME_METHODS) -> str:
     """Mean misclassification % per method and floor at the noise levels of Fig. 2 and 5."""
     cols: List[Tuple[Experiment, int]] = []
     for exp in exps:
@@ -303,7 +346,8 @@ def headline(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
     names = list(methods) + [FLOOR, FLOOR_W]
     frames = [(2, n) for n in names]
     if extra_frames > 2:
-        frames += [(extra_frames, n) for n in runner_names(exps[0], extra_frames, methods)]
+        names_k = runner_names(exps[0], extra_frames, methods, multi)
+        frames += [(extra_frames, n) for n in names_k]
     for k, name in frames:
         label = name if k == 2 else f'{name}, K={extra_frames}'
         rows.append([label] + [
@@ -313,14 +357,14 @@ def headline(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
 
 
 def timing_table(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
-                 methods: Sequence[str], extra_frames: int) -> str:
-    """Median solver time per call (ms) per runner and experiment."""
+                 field: str = 'cpu_ms_median') -> str:
+    """Median solver time per call (ms, ``field`` of the stats) per runner and experiment."""
     rows = []
     keys = sorted({(k, name) for (_, k, name, _) in stats}, key=lambda t: (t[0], t[1]))
     for k, name in keys:
         row: List[object] = [f'{name}, K={k}']
         for exp in exps:
-            vals = [stats[(exp.key, k, name, j)]['ms_median'] for j in range(len(exp.xs))
+            vals = [stats[(exp.key, k, name, j)][field] for j in range(len(exp.xs))
                     if (exp.key, k, name, j) in stats]
             row.append(_fmt(float(np.median(vals)), 1) if vals else '—')
         rows.append(row)
@@ -328,7 +372,8 @@ def timing_table(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
 
 
 def plot_experiment(exp: Experiment, stats: Dict[Key, Dict[str, float]],
-                    methods: Sequence[str], extra_frames: int, path) -> None:
+                    methods: Sequence[str], extra_frames: int, path,
+                    multi: Sequence[str] = MULTI_FRAME_METHODS) -> None:
     """PNG: misclassification and motion error vs the swept value (+ the K-frame panel)."""
     n_panels = 3 if extra_frames > 2 else 2
     fig, axes = common.new_figure(n_panels)
@@ -348,13 +393,16 @@ def plot_experiment(exp: Experiment, stats: Dict[Key, Dict[str, float]],
                        'misclassified lines (%), mean', 'two views', styles=fstyle)
     common.plot_series(axes[1], xs, series(2, [n for n in names2 if not n.startswith('floor')],
                                            'rel_mean'),
-                       exp.xlabel, 'relative error of w (%), mean', 'two views', styles=fstyle)
+                       exp.xlabel, 'relative error of w (%), mean (log scale)', 'two views',
+                       styles=fstyle)
+    axes[1].set_yscale('log', nonpositive='mask')
     if n_panels == 3:
-        namesk = runner_names(exp, extra_frames, methods)
+        namesk = runner_names(exp, extra_frames, methods, multi)
         sk = series(extra_frames, namesk, 'miscl_mean')
         s = {f'{n}, K={extra_frames}': v for n, v in sk.items()}
-        styles = {f'{FLOOR_W}, K={extra_frames}': {'color': '0.55'},
-                  f'robust, K={extra_frames}': {'color': COLORS['robust']}}
+        styles = {f'{FLOOR_W}, K={extra_frames}': {'color': '0.55'}}
+        styles.update({f'{m}, K={extra_frames}': {'color': COLORS[m]}
+                       for m in MULTI_FRAME_METHODS})
         if 'robust' in methods:
             s['robust, K=2'] = series(2, ['robust'], 'miscl_mean')['robust']
             styles['robust, K=2'] = {'color': 'C3', 'alpha': 0.5, 'linestyle': '-.'}
@@ -388,7 +436,12 @@ HOW_TO_READ = """\
   (`floor (weighted)`). No method can be expected to beat the floor of the same residual on the
   same data; a method below the unweighted floor is using a better residual.
 - `(f unknown)`: intrinsics not given (image size only); the focal length is estimated.
-- `K=5`: the same protocol with five views and constant motion; the robust method and the floors.
+- `K=5`: the same protocol with five views and constant motion (rotation and translation);
+  the multi-frame methods (`robust`; `general`, which also fits a translation per body and needs
+  three or more views: with two views it returns the rotation-only result; run with K views on
+  the translation experiments, Fig. 3-4, only, for time) and the floors (true rotations,
+  translation ignored). Under translation a "floor" built from the true rotations
+  alone is not a bound: estimated rotations can absorb part of the translational flow.
 - Every method sees the same scenes (seeds fixed by experiment, K, point and trial).
 """
 
@@ -397,19 +450,27 @@ def build_report(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
                  errors: Dict[str, List[str]], methods: Sequence[str], args: argparse.Namespace,
                  command: str, seconds: float) -> str:
     """Whole Markdown report."""
+    cpu = sum(s['cpu_total'] for s in stats.values())
     extra = {'Trials per point': str(args.trials), 'Methods': ', '.join(methods),
-             'Wall time': f'{seconds:.0f} s with {args.jobs} worker process(es)',
-             'Base seed': str(args.seed)}
+             f'Methods on the {args.frames}-view scenes': ', '.join(
+                 m for m in methods if m in args.multi) or 'none',
+             'Run time': f'{seconds:.0f} s wall with {args.jobs} worker process(es); '
+                         f'{cpu:.0f} s CPU in the solver calls (the wall time depends on what '
+                         f'else the machine runs; CPU / workers is the uncontended estimate)',
+             'Base seed': str(args.seed),
+             'Solver revision': common.git_revision('mlofc_ros/solver')}
     parts = [common.run_header('Paper experiments (section 4.1, Fig. 2-5)', command, extra)]
-    head = headline(exps, stats, methods, args.frames)
+    head = headline(exps, stats, methods, args.frames, args.multi)
     if head:
         parts += ['## Headline: misclassification %, mean over trials', '', head]
     parts.append(HOW_TO_READ)
     for exp in exps:
-        parts.append(figure_section(exp, stats, methods, args.frames))
+        parts.append(figure_section(exp, stats, methods, args.frames, args.multi))
         parts.append(f'![{exp.key}](paper_{exp.key}.png)\n')
-    parts += ['## Solver time', '', 'Median wall time per call (ms), one process:', '',
-              timing_table(exps, stats, methods, args.frames)]
+    parts += ['## Solver time', '', 'Median CPU time per call (ms), one process, per experiment:',
+              '', timing_table(exps, stats, 'cpu_ms_median'),
+              'Median wall time per call (ms; inflated when the machine is shared):', '',
+              timing_table(exps, stats, 'ms_median')]
     if errors:
         parts += ['## Failures', '']
         for where, msgs in sorted(errors.items()):
@@ -438,11 +499,18 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                    help='comma-separated subset of fig2,fig3,fig4,fig5')
     p.add_argument('--methods', default=None,
                    help='comma-separated subset of mlofc_ros.solver.METHODS (default all)')
+    p.add_argument('--multi', default=None,
+                   help='methods also run on the multi-frame scenes (default '
+                        f'{",".join(MULTI_FRAME_METHODS)}; robust with --quick)')
     args = p.parse_args(list(argv))
     if args.trials is None:
         args.trials = 2 if args.quick else 50
     if args.frames is None:
         args.frames = 3 if args.quick else 5
+    if args.multi is None:
+        args.multi = ('robust',) if args.quick else MULTI_FRAME_METHODS
+    else:
+        args.multi = tuple(m.strip() for m in args.multi.split(',') if m.strip())
     if args.trials < 1 or args.jobs < 1 or args.frames < 2:
         p.error('--trials and --jobs must be >= 1, --frames >= 2')
     return args
@@ -466,7 +534,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         common.eprint(f'no experiment selected by --figs {args.figs!r}')
         return 2
     out_dir = common.results_dir(args.out)
-    units = make_units(exps, methods, args.trials, args.frames, args.seed)
+    units = make_units(exps, methods, args.trials, args.frames, args.seed, args.multi)
     # biggest scenes first so the pool ends evenly
     units.sort(key=lambda u: -(u.n_frames * u.exp.n_bodies ** 2 * len(u.runners)))
     common.eprint(f'paper: {len(units)} scenes, {sum(len(u.runners) for u in units)} solver '
@@ -489,7 +557,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     report = build_report(exps, stats, errors, methods, args, command, seconds)
     (out_dir / 'paper.md').write_text(report)
     for exp in exps:
-        plot_experiment(exp, stats, methods, args.frames, out_dir / f'paper_{exp.key}.png')
+        plot_experiment(exp, stats, methods, args.frames, out_dir / f'paper_{exp.key}.png',
+                        args.multi)
     print(report)
     common.eprint(f'paper: wrote {out_dir / "paper.md"} and {len(exps)} plots in {seconds:.0f} s')
     return 0
