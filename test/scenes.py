@@ -18,8 +18,9 @@ from mlofc_ros.solver.lines import rotation_matrix
 
 
 def random_scene(n_bodies, lines_per_body, n_frames=2, noise=0.0, f=1000.0, size=1000,
-                 deg=(2.0, 6.0), seed=0, vertical=0):
-    """Bodies rotating about the camera centre; returns tracks, labels, rotvecs, intrinsics."""
+                 deg=(2.0, 6.0), seed=0, vertical=0, own_centre=False):
+    """Bodies rotating about the camera centre (or their own centre); returns tracks, labels,
+    rotation vectors per frame and intrinsics."""
     rng = np.random.default_rng(seed)
     cx = cy = size / 2.0
     K = np.array([[f, 0, cx], [0, f, cy], [0, 0, 1.0]])
@@ -30,6 +31,7 @@ def random_scene(n_bodies, lines_per_body, n_frames=2, noise=0.0, f=1000.0, size
         w = np.deg2rad(rng.uniform(*deg)) * axis
         omegas.append(w)
         R = rotation_matrix(w)
+        centre = np.array([rng.uniform(-1, 1), rng.uniform(-1, 1), 6.5]) if own_centre else 0.0
         got = 0
         while got < lines_per_body:
             z = rng.uniform(5, 8, 2)
@@ -41,7 +43,7 @@ def random_scene(n_bodies, lines_per_body, n_frames=2, noise=0.0, f=1000.0, size
             P = (np.linalg.inv(K) @ np.c_[uv, np.ones(2)].T * z).T      # (2, 3)
             frames = []
             for k in range(n_frames):
-                Pk = P @ np.linalg.matrix_power(R, k).T
+                Pk = (P - centre) @ np.linalg.matrix_power(R, k).T + centre
                 # slide endpoints along the 3D line: only the line matters
                 d = Pk[1] - Pk[0]
                 a, b = rng.uniform(-0.1, 0.1, 2)

@@ -18,6 +18,8 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 
 from .focal import first_order_focal, profile_cost, refine_focal
+from .general import (body_covariance, general_costs, general_segmentation, LineObservations,
+                      spatial_labels)
 from .gpca import algebraic_normals
 from .ksubspaces import assign, ksubspaces, total_cost
 from .lines import cayley_jacobian, cayley_to_rotvec, line_flows, LineFlows, rotvec_to_cayley
@@ -26,7 +28,7 @@ from .result import SegmentationResult
 from .robust import noise_sigma, robust_segmentation
 
 #: Methods accepted by :func:`segment_lines`.
-METHODS = ('algebraic', 'kmeans', 'algebraic+kmeans', 'robust')
+METHODS = ('algebraic', 'kmeans', 'algebraic+kmeans', 'robust', 'general')
 
 #: Random restarts of the paper's K-means from a random labelling (the best is kept).
 KMEANS_RESTARTS = 10
@@ -95,7 +97,7 @@ def min_tracks_needed(n_bodies: int, n_frames: int, method: str, focal_known: bo
 def _solve_known_f(flows: LineFlows, tracks: np.ndarray, n: int, method: str,
                    rng: np.random.Generator, init_labels=None):
     """Labels, Cayley vectors, exact weighted costs and info for one method at known f."""
-    if method == 'robust':
+    if method in ('robust', 'general'):
         return robust_segmentation(flows, tracks, n, rng, init_labels=init_labels)
     stats = track_stats(flows, weighted=False)          # the paper's methods are unweighted
     if n == 1:
@@ -203,9 +205,14 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         raise ValueError(f'{usable} usable tracks (present in two consecutive frames), but '
                          f'{n} bodies with method {method!r} need at least {need}')
     rng = np.random.default_rng(seed)
+    if method == 'general':
+        rot = segment_lines(arr, n, intr, size, 'robust', seed=seed, init_labels=init_labels)
+        return _general(arr, rot, rng, init_labels)
     if intr is not None:
         flows = line_flows(arr, intr)
         labels, c, costs, info = _solve_known_f(flows, arr, n, method, rng, init_labels)
+        info.update(principal_point=(intr[2], intr[3]), aspect=intr[1] / intr[0],
+                    image_size=size)
         return _finish(flows, labels, c, costs, intr[0], method, info)
     # unknown focal length: first-order multibody estimate, then exact profile refinement
     w, h = size
@@ -230,7 +237,57 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         f = refine_focal(profile_cost(arr, labels, n, centre), f, span=span)
     flows = line_flows(arr, (f, f) + centre)
     labels, c, costs, sub = _solve_known_f(flows, arr, n, method, rng, init_labels)
-    return _finish(flows, labels, c, costs, f, method, dict(info, **sub))
+    info.update(sub, principal_point=centre, aspect=1.0, image_size=size)
+    return _finish(flows, labels, c, costs, f, method, info)
+
+
+def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
+             init_labels=None) -> SegmentationResult:
+    """The 'general' method: rotation AND translation per body (see :mod:`.general`).
+
+    Starts from the rotation-only solution ``rot`` (which also supplies the focal length when
+    it was unknown) and a spatial clustering; needs three frames, else returns ``rot``.
+    """
+    if arr.shape[1] < 3:
+        rot.method = 'general'
+        rot.info['general'] = 'window has fewer than 3 frames: rotation-only result'
+        return rot
+    n, f = rot.n_bodies, rot.focal_length
+    size = rot.info.get('image_size')
+    cx, cy = rot.info['principal_point']
+    obs = LineObservations(arr, (f, f * rot.info.get('aspect', 1.0), cx, cy))
+    starts = [('rotation-only', rot.labels), ('spatial', spatial_labels(arr, n, rng))]
+    if init_labels is not None:
+        starts.insert(0, ('previous', np.asarray(init_labels)))
+    sol = general_segmentation(obs, n, starts, rot.angular_velocities)
+    labels = sol['labels']
+    dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
+    # translation is a nested extension: keep a body's exact rotation-only fit (T = 0) unless
+    # the translation pays for its two parameters (BIC); T is then reported as zero
+    flows = line_flows(arr, obs.intrinsics)
+    c_rot, _ = fit_bodies(flows, labels, n)
+    w_rot = cayley_to_rotvec(c_rot)
+    cost_rot = general_costs(obs, w_rot, np.zeros((n, 3)))
+    for b in range(n):                                    # bodies, not lines
+        mine = labels == b
+        if not np.any(mine):
+            continue
+        gain = np.nansum(sol['costs'][mine, b]) - np.nansum(cost_rot[mine, b])
+        if gain > -2.0 * sol['sigma2'] * np.log(max(dof[mine].sum(), 2.0)):
+            sol['W'][b], sol['T'][b] = w_rot[b], 0.0
+            sol['costs'][:, b] = cost_rot[:, b]
+    cov = np.stack([body_covariance(obs, np.flatnonzero(labels == b), sol['W'][b],
+                                    sol['T'][b], sol['sigma2']) for b in range(n)])
+    with np.errstate(invalid='ignore', divide='ignore'):
+        best = sol['costs'][np.arange(arr.shape[0]),
+                            np.where(labels >= 0, labels,
+                                     np.argmin(np.nan_to_num(sol['costs'], nan=np.inf), 1))]
+        rms = np.where(dof > 0, np.sqrt(best / dof), np.nan)
+    info = dict(rot.info, sigma_px=float(np.sqrt(sol['sigma2'])), start=sol['start'],
+                translation_directions=sol['T'], image_size=size)
+    return SegmentationResult(labels=labels, angular_velocities=sol['W'],
+                              angular_covariances=cov, focal_length=f, residuals=rms,
+                              costs=sol['costs'], method='general', info=info)
 
 
 def assign_with_motions(tracks, angular_velocities, intrinsics: Sequence[float], *,
