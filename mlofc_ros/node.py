@@ -54,7 +54,7 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from mlofc_ros import params as P
 from mlofc_ros.camera import CameraModel
-from mlofc_ros.image.encodings import image_msg_to_gray
+from mlofc_ros.image.decode import image_msg_to_gray
 from mlofc_ros.messages.debug import draw_debug
 from mlofc_ros.pipeline import FrameResult, Pipeline
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,

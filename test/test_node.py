@@ -38,7 +38,7 @@ from test_pipeline import (evaluate, GOAL_MISCLASSIFIED, GOAL_OMEGA_ERROR, small
 
 from mlofc_ros import params as P
 from mlofc_ros.camera import CameraModel
-from mlofc_ros.image.encodings import gray_to_image_fields
+from mlofc_ros.image.decode import gray_to_image_fields
 from mlofc_ros.messages.segments import SEGMENT_FIELDS
 from mlofc_ros.node import MlofcNode, parameter_descriptor
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info,

@@ -224,7 +224,7 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
     ``ValueError`` for invalid parameters. Frames the pipeline rejects are counted in
     ``stats.errors`` and skipped, as the node does.
     """
-    from mlofc_ros.image.encodings import image_msg_to_gray
+    from mlofc_ros.image.decode import image_msg_to_gray
     from mlofc_ros.messages.debug import draw_debug
     from mlofc_ros.pipeline import Pipeline
     from mlofc_ros.ros_messages import (debug_image_msg, segments_msg, stamp_to_seconds,

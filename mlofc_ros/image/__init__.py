@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Image decoding: ``sensor_msgs/Image`` payloads to 8-bit grayscale (numpy + OpenCV, no ROS)."""
-from mlofc_ros.image.encodings import (
+from mlofc_ros.image.decode import (
     as_byte_array,
     byte_length,
     encoding_info,

@@ -16,7 +16,7 @@ from typing import Any, Dict
 
 import numpy as np
 
-from mlofc_ros.image.encodings import gray_to_image_fields
+from mlofc_ros.image.decode import gray_to_image_fields
 
 
 def bgr8_fields(image: np.ndarray) -> Dict[str, Any]:

@@ -31,7 +31,7 @@ from typing import Any, Dict, Tuple
 
 import numpy as np
 
-from mlofc_ros.image.encodings import as_byte_array
+from mlofc_ros.image.decode import as_byte_array
 
 #: ``sensor_msgs/PointField`` datatype codes.
 INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
