@@ -312,8 +312,9 @@ class LineTracker:
 
         ``seg`` (n, 4) previous segments, ``p0``/``p1`` (n, P, 2) points before/after, ``valid``
         (n, P). Returns ``(new segments (n, 4), ok (n,), velocity (n, 4))``: the TLS line of
-        the points (at most one outlier dropped), spanning the old endpoints moved by the
-        points' affine-in-t displacement and projected onto it.
+        the points (at most one outlier dropped), spanning the old endpoints projected onto it
+        and slid by the points' mean displacement along it; ``ok`` also requires the line to
+        turn by at most ``max_turn_deg``.
         """
         h, w = self._shape
         x, y = p1[..., 0].astype(np.float64), p1[..., 1].astype(np.float64)
@@ -334,8 +335,8 @@ class LineTracker:
         ok &= np.abs(cos_turn) >= np.cos(np.deg2rad(self.max_turn_deg))
         flip = cos_turn < 0
         ux, uy = np.where(flip, -ux, ux), np.where(flip, -uy, uy)
-        # extent: old endpoints projected on the new line, slid by the median along-line
-        # displacement of the points (LK's along-edge motion is noisy, its median is not)
+        # extent: old endpoints projected on the new line, slid by the mean along-line
+        # displacement of the points
         disp = (p1 - p0).astype(np.float64)
         along = disp[..., 0] * ux[:, None] + disp[..., 1] * uy[:, None]
         slide = (wt * along).sum(1) / np.maximum(wt.sum(1), 1.0)
