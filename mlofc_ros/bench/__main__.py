@@ -23,6 +23,7 @@ BENCHMARKS = {
     'accuracy': 'robust solver vs floor, outliers, multi-frame, model selection, solver speed',
     'pipeline': 'per-stage timings of the whole per-frame pipeline vs LSD alone',
     'ros': 'highest image rate the running node keeps up with, and its latency',
+    'soak': 'resident memory over a long run of the pipeline (10,000 frames)',
 }
 
 

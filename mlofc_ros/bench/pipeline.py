@@ -1,0 +1,320 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Per-stage timings of the per-frame pipeline, against OpenCV's LSD alone on the same frames.
+
+For every frame of every sequence, in this order and single-threaded (``cv2.setNumThreads(1)``,
+one BLAS thread): decode a ``sensor_msgs/Image``-like object (mono8, and bgr8 separately) with
+:func:`~mlofc_ros.image.image_msg_to_gray`; :meth:`Pipeline.process` (its own ``timings``:
+detect/track, undistort + window, solve, total); pack the result with
+:func:`~mlofc_ros.messages.segment_cloud_fields`; and ``cv2.createLineSegmentDetector().detect``
+on the same gray image as the reference. Interleaving the reference with the pipeline frame by
+frame exposes both to the same machine load, so their ratio is meaningful on a shared machine
+even when absolute milliseconds are not.
+
+Sequences: rendered boxes + background (640x480 and 1280x720 by default) and the real sequences
+under ``--real-dir`` (``*/frames/*.png``; visp_cube's ``cube.xml`` gives its intrinsics, the
+others have none so the solver estimates the focal length). Statistics skip the first
+``window`` frames (window filling). Writes ``pipeline.md`` and ``pipeline.png``.
+
+Run ``python -m mlofc_ros.bench pipeline``.
+"""
+import argparse
+import glob
+import math
+import os
+import re
+import sys
+import time
+from types import SimpleNamespace
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+# importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
+from mlofc_ros.bench import common
+
+REAL_DIR = os.environ.get('MLOFC_REAL_DIR', '/work/shared/data/real')
+
+#: Reported stages: (column key, label). ``other`` = undistort + window + pipeline bookkeeping.
+STAGES = (('decode', 'decode mono8'), ('detect_track', 'detect/track'), ('other', 'other'),
+          ('solve', 'solve'), ('pack', 'pack msg'))
+#: Goal: pipeline / LSD at 640x480.
+GOAL_RATIO = 0.5
+
+
+class Sequence_(SimpleNamespace):
+    """A named list of gray frames, their stamps (s), a camera or None, and num_bodies."""
+
+
+def read_visp_camera(path: str) -> Optional[Tuple[float, float, float, float]]:
+    """``(fx, fy, cx, cy)`` px from a ViSP ``<camera>`` block (``px, py, u0, v0``), else None."""
+    try:
+        text = open(path).read()
+    except OSError:
+        return None
+    vals = {}
+    for key in ('px', 'py', 'u0', 'v0'):
+        m = re.search(rf'<camera>.*?<{key}>\s*([-+0-9.eE]+)\s*</{key}>', text, re.S)
+        if not m:
+            return None
+        vals[key] = float(m.group(1))
+    return vals['px'], vals['py'], vals['u0'], vals['v0']
+
+
+def real_sequences(root: str, max_frames: int) -> List[Sequence_]:
+    """The real sequences under ``root`` (``<name>/frames/*.png``), gray, 30 Hz stamps."""
+    import cv2
+    out = []
+    for d in sorted(glob.glob(os.path.join(root, '*', 'frames'))):
+        files = sorted(glob.glob(os.path.join(d, '*.png')))[:max_frames]
+        frames = [cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in files]
+        frames = [f for f in frames if f is not None]
+        if len(frames) < 3:
+            continue
+        name = os.path.basename(os.path.dirname(d))
+        xml = glob.glob(os.path.join(os.path.dirname(d), '*.xml'))
+        camera = read_visp_camera(xml[0]) if xml else None
+        out.append(Sequence_(name=name, frames=frames,
+                             stamps=[i / 30.0 for i in range(len(frames))], camera=camera,
+                             num_bodies=2, kind='real'))
+    return out
+
+
+def rendered_sequences(sizes: Sequence[Tuple[int, int]], frames: int, boxes: int,
+                       seed: int) -> List[Sequence_]:
+    """Rendered boxes + background at each size (``camera_centre`` motion, noise 2)."""
+    from mlofc_ros.render import render_sequence
+    out = []
+    for w, h in sizes:
+        seq = render_sequence(boxes, frames, size=(w, h), motion='camera_centre',
+                              background=True, noise_sigma=2.0, seed=seed)
+        out.append(Sequence_(name=f'rendered {w}x{h}', frames=list(seq.frames),
+                             stamps=list(seq.stamps), camera=seq.camera,
+                             num_bodies=boxes + 1, kind='rendered'))
+    return out
+
+
+def image_message(img: np.ndarray, encoding: str) -> SimpleNamespace:
+    """A ``sensor_msgs/Image``-like object (fields only) holding ``img`` as ``encoding``."""
+    from mlofc_ros.image import gray_to_image_fields
+    fields = gray_to_image_fields(img, encoding)
+    fields['data'] = bytes(fields['data'])
+    return SimpleNamespace(**fields)
+
+
+def run_sequence(seq: Sequence_, method: Optional[str] = None) -> Dict[str, np.ndarray]:
+    """Time every stage on every frame of ``seq``; returns ms arrays per key (one per frame).
+
+    Keys: ``decode`` (mono8), ``decode_bgr8``, ``detect_track``, ``undistort``, ``window``,
+    ``solve``, ``other`` (``total`` minus detect/track and solve), ``total`` (the whole
+    ``Pipeline.process``), ``pack``, ``end_to_end`` (decode + process + pack), ``lsd``,
+    ``segments`` and ``tracks`` (counts).
+    """
+    import cv2
+
+    from mlofc_ros.image import image_msg_to_gray
+    from mlofc_ros.messages import segment_cloud_fields
+    from mlofc_ros.pipeline import Pipeline
+
+    kwargs = {'num_bodies': seq.num_bodies}
+    if method:
+        kwargs['method'] = method
+    pipe = Pipeline(**kwargs)
+    lsd = cv2.createLineSegmentDetector()
+    rows: Dict[str, List[float]] = {k: [] for k in (
+        'decode', 'decode_bgr8', 'detect_track', 'undistort', 'window', 'solve', 'other',
+        'total', 'pack', 'end_to_end', 'lsd', 'segments', 'tracks', 'solved')}
+    clock = time.perf_counter
+    for gray, stamp in zip(seq.frames, seq.stamps):
+        mono = image_message(gray, 'mono8')
+        bgr = image_message(cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR), 'bgr8')
+        t = clock()
+        decoded = image_msg_to_gray(mono)
+        decode = (clock() - t) * 1e3
+        t = clock()
+        image_msg_to_gray(bgr)
+        rows['decode_bgr8'].append((clock() - t) * 1e3)
+        r = pipe.process(decoded, stamp, seq.camera)
+        t = clock()
+        segment_cloud_fields(r.segments, r.track_ids, r.labels, r.residuals)
+        pack = (clock() - t) * 1e3
+        t = clock()
+        lsd.detect(gray)
+        rows['lsd'].append((clock() - t) * 1e3)
+        tm = r.timings
+        rows['decode'].append(decode)
+        rows['pack'].append(pack)
+        for k in ('detect_track', 'undistort', 'window', 'solve', 'total'):
+            rows[k].append(tm.get(k, math.nan))
+        rows['other'].append(tm['total'] - tm['detect_track'] - tm['solve'])
+        rows['end_to_end'].append(decode + tm['total'] + pack)
+        rows['segments'].append(len(r.segments))
+        rows['tracks'].append(r.n_tracks)
+        rows['solved'].append(float(r.solved))
+    return {k: np.asarray(v, dtype=np.float64) for k, v in rows.items()}
+
+
+def _steady(values: np.ndarray, skip: int) -> np.ndarray:
+    return values[skip:] if len(values) > skip + 1 else values
+
+
+def _med(v: np.ndarray) -> float:
+    return float(np.median(v)) if len(v) else math.nan
+
+
+def _p95(v: np.ndarray) -> float:
+    return float(np.percentile(v, 95)) if len(v) else math.nan
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench pipeline',
+                                 description='Per-stage pipeline timings vs LSD alone.')
+    ap.add_argument('--sizes', default='640x480,1280x720', help='rendered sizes, WxH,...')
+    ap.add_argument('--frames', type=int, default=60, help='rendered frames per size (60)')
+    ap.add_argument('--boxes', type=int, default=2, help='moving boxes (2) + background')
+    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--real-dir', default=REAL_DIR, help='real sequences (*/frames/*.png)')
+    ap.add_argument('--real-frames', type=int, default=80, help='max frames per real sequence')
+    ap.add_argument('--method', default=None, help='solver method (default: the default)')
+    ap.add_argument('--quick', action='store_true',
+                    help='smoke run: 8 frames of 320x240, no real sequence')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    args = ap.parse_args(list(argv))
+    if args.quick:
+        args.sizes, args.frames, args.real_frames = '320x240', 8, 0
+    args.wh = []
+    for s in args.sizes.split(','):
+        w, sep, h = s.strip().lower().partition('x')
+        if not sep:
+            ap.error(f'bad size {s!r}, expected WxH')
+        args.wh.append((int(w), int(h)))
+    return args
+
+
+def plot(path: 'os.PathLike', names: Sequence[str], med: Dict[str, Dict[str, float]]) -> None:
+    """Stacked bars of the median stage times per sequence, LSD alone next to each."""
+    fig, (ax,) = common.new_figure(1, width_per_panel=max(6.0, 1.6 * len(names)), height=4.2)
+    x = np.arange(len(names))
+    bottom = np.zeros(len(names))
+    for i, (key, label) in enumerate(STAGES):
+        vals = np.array([med[n][key] for n in names])
+        ax.bar(x - 0.2, vals, 0.38, bottom=bottom, label=label, color=f'C{i}')
+        bottom += vals
+    ax.bar(x + 0.2, [med[n]['lsd'] for n in names], 0.38, label='LSD alone (reference)',
+           color='0.45', hatch='//')
+    for xi, n in zip(x, names):
+        ax.text(xi - 0.2, bottom[list(names).index(n)], f'{med[n]["ratio"]:.2f}x',
+                ha='center', va='bottom', fontsize=8)
+    ax.set_xticks(x)
+    ax.set_xticklabels([n.replace('rendered ', 'rendered\n') for n in names], fontsize=8)
+    ax.set_ylabel('median ms per frame (stages stacked)')
+    ax.set_title('pipeline stages vs LSD alone (label: Pipeline.process / LSD)', fontsize=10)
+    ax.grid(True, axis='y', alpha=0.3)
+    common.save_figure(fig, path, legend_ax=ax)
+
+
+def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[Sequence_],
+                 res: Dict[str, Dict[str, np.ndarray]], skip: int, wall: float) -> str:
+    head = common.run_header(
+        'Pipeline: per-stage timings vs LSD alone', common.command_line('pipeline', argv),
+        {'Threads': 'single (`cv2.setNumThreads(1)`, one BLAS thread); the machine is shared, '
+                    'so compare ratios to the LSD reference measured in the same run on the '
+                    'same frames, not absolute ms across runs',
+         'Code': f'pipeline {common.git_revision("mlofc_ros/pipeline.py")}, solver '
+                 f'{common.git_revision("mlofc_ros/solver")}, tracks '
+                 f'{common.git_revision("mlofc_ros/tracks")}, detect '
+                 f'{common.git_revision("mlofc_ros/segments")}',
+         'Wall time': f'{wall:.0f} s',
+         'Load average (1 min) at start / end': f'{args.load:.1f} / {os.getloadavg()[0]:.1f}'})
+    names = [s.name for s in seqs]
+    lines = [head]
+    rows, stage_rows = [], []
+    for s in seqs:
+        r = {k: _steady(v, skip) for k, v in res[s.name].items()}
+        ratio = _med(r['total']) / _med(r['lsd'])
+        h, w = s.frames[0].shape
+        cam = 'given' if s.camera is not None else 'none (f estimated)'
+        rows.append([s.name, f'{w}x{h}', len(r['total']), s.num_bodies, cam,
+                     _med(r['tracks']), _med(r['total']), _p95(r['total']),
+                     _med(r['end_to_end']), _med(r['lsd']), _p95(r['lsd']), ratio,
+                     _med(r['end_to_end']) / _med(r['lsd'])])
+        stage_rows.append([s.name] + [f'{_med(r[k]):.3g} / {_p95(r[k]):.3g}' for k in (
+            'decode', 'decode_bgr8', 'detect_track', 'undistort', 'window', 'other', 'solve',
+            'pack', 'total', 'lsd')])
+    first = next((rw for rw in rows if rw[1] == '640x480' and rw[0].startswith('rendered')),
+                 rows[0] if rows else None)
+    if first is not None:
+        verdict = 'met' if first[11] <= GOAL_RATIO else 'NOT met'
+        lines += ['## Headline', '',
+                  f'- {first[0]}: `Pipeline.process` median **{first[6]:.1f} ms** (p95 '
+                  f'{first[7]:.1f}), LSD alone {first[9]:.1f} ms on the same frames: ratio '
+                  f'**{first[11]:.2f}** (goal <= {GOAL_RATIO:g}: {verdict}); decode + process + '
+                  f'pack {first[8]:.1f} ms.', '']
+    lines += ['## Whole pipeline vs LSD', '',
+              common.markdown_table(
+                  ['sequence', 'size', 'frames', 'bodies', 'camera', 'tracks (median)',
+                   'process median ms', 'process p95 ms', 'decode+process+pack median ms',
+                   'LSD median ms', 'LSD p95 ms', 'process / LSD', 'end-to-end / LSD'], rows),
+              f'Statistics over frames >= {skip} (the first `window` frames fill the window). '
+              'Ratios are of medians. `process` is `Pipeline.process` (`timings["total"]`).', '',
+              '## Stages (median / p95 ms per frame)', '',
+              common.markdown_table(
+                  ['sequence', 'decode mono8', 'decode bgr8', 'detect/track', 'undistort',
+                   'window', 'other (in process)', 'solve', 'pack msg', 'process total',
+                   'LSD alone'], stage_rows),
+              '- decode: `image_msg_to_gray` on a message-like object (mono8; bgr8 separately, '
+              'not part of the pipeline total).',
+              '- detect/track, undistort, window, solve: `FrameResult.timings`; other = process '
+              'total - detect/track - solve (undistort, window, body ids, bookkeeping).',
+              '- pack msg: `segment_cloud_fields` (the `~/segments` PointCloud2 payload).',
+              '- LSD alone: `cv2.createLineSegmentDetector().detect` (default parameters, '
+              'full resolution) on the same gray frame, timed right after the pipeline.', '',
+              '![stages](pipeline.png)', '']
+    plot(common.results_dir(args.out) / 'pipeline.png', names,
+         {s.name: dict({k: _med(_steady(res[s.name][k], skip)) for k, _ in STAGES},
+                       lsd=_med(_steady(res[s.name]['lsd'], skip)),
+                       ratio=_med(_steady(res[s.name]['total'], skip))
+                       / _med(_steady(res[s.name]['lsd'], skip))) for s in seqs})
+    return '\n'.join(lines)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    argv = list(argv or [])
+    args = parse_args(argv)
+    args.load = os.getloadavg()[0]
+    import cv2
+    cv2.setNumThreads(1)
+    from mlofc_ros import params
+
+    t0 = time.monotonic()
+    out = common.results_dir(args.out)
+    common.eprint('pipeline: rendering', ', '.join(f'{w}x{h}' for w, h in args.wh))
+    seqs = rendered_sequences(args.wh, args.frames, args.boxes, args.seed)
+    if args.real_frames > 0 and args.real_dir:
+        seqs += real_sequences(args.real_dir, args.real_frames)
+    skip = int(params.PARAMS['window'].default)
+    res = {}
+    for s in seqs:
+        common.eprint(f'pipeline: {s.name} ({len(s.frames)} frames)')
+        res[s.name] = run_sequence(s, args.method)
+        r = res[s.name]
+        common.eprint(f'  process median {_med(r["total"]):.1f} ms, LSD {_med(r["lsd"]):.1f} ms')
+    report = build_report(args, argv, seqs, res, skip, time.monotonic() - t0)
+    (out / 'pipeline.md').write_text(report)
+    print(report)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))

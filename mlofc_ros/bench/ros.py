@@ -1,0 +1,474 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""The running node under rising image rates: drops, throughput and latency over DDS.
+
+``mlofc_node`` runs in its own process on a fresh ``ROS_DOMAIN_ID`` (localhost discovery). It is
+started through a thin wrapper (``python -m mlofc_ros.bench.ros --child STATS -- --ros-args
+...``) that builds the same :class:`~mlofc_ros.node.MlofcNode` as the console script and spins
+it the same way, and in addition writes the node's own counters (``stats``: received,
+processed, dropped by its bounded queue, skipped, errors; plus the frames pending) to a JSON
+file ten times a second, so drops are the node's count, not a guess.
+
+This process renders 640x480 frames (boxes + background), then for each rate publishes
+``--frames`` mono8 ``sensor_msgs/Image`` (sensor-data QoS, like a camera driver; a
+``CameraInfo`` before each image) on a steady clock, stamped with the wall time at publication,
+waits for the node to drain, and counts the ``~/segments`` messages received (reliable QoS).
+Latency = reception wall time - image stamp (both clocks of this process). A rate is kept up
+with when every published frame is answered and the node dropped none.
+
+Run ``python -m mlofc_ros.bench ros``; writes ``ros.md`` and ``ros.png``.
+"""
+import argparse
+import json
+import math
+import os
+import pathlib
+import sys
+import tempfile
+import threading
+import time
+from typing import Any, Dict, List, Optional, Sequence
+
+import numpy as np
+
+# importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
+from mlofc_ros.bench import common
+
+NODE_NAME = 'mlofc'
+IMAGE_TOPIC = '/bench/image_raw'
+INFO_TOPIC = '/bench/camera_info'
+SEG_TOPIC = f'/{NODE_NAME}/segments'
+DEFAULT_RATES = '2,3,5,10,15,20,30,45,60'
+
+
+# --- the node side -------------------------------------------------------------------------
+
+def _write_json(path: str, data: Dict[str, Any]) -> None:
+    tmp = path + '.tmp'
+    with open(tmp, 'w') as f:
+        json.dump(data, f)
+    os.replace(tmp, path)
+
+
+def child_main(stats_path: str, ros_args: Sequence[str]) -> int:
+    """Run ``MlofcNode`` like ``mlofc_node`` does, dumping ``node.stats`` to ``stats_path``."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    from mlofc_ros.node import MlofcNode
+
+    rclpy.init(args=['mlofc_node', *ros_args])
+    node = None
+    proc_wall: List[float] = []
+    proc_cpu: List[float] = []
+
+    def dump() -> None:
+        if node is not None:
+            _write_json(stats_path, dict(node.stats, pending=node.pending_frames(),
+                                         time=time.time(), proc_wall=proc_wall,
+                                         proc_cpu=proc_cpu))
+
+    def timed(process: Any) -> Any:
+        def wrapper(*a: Any, **kw: Any) -> Any:
+            t, c = time.perf_counter(), time.thread_time()
+            try:
+                return process(*a, **kw)
+            finally:
+                proc_wall.append(1e3 * (time.perf_counter() - t))
+                proc_cpu.append(1e3 * (time.thread_time() - c))
+        return wrapper
+    try:
+        node = MlofcNode()
+        pipe = getattr(node, '_pipeline', None)     # time Pipeline.process inside the node
+        if pipe is not None:
+            pipe.process = timed(pipe.process)
+        node.create_timer(0.1, dump)
+        dump()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            dump()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+# --- the bench side ------------------------------------------------------------------------
+
+class BenchError(Exception):
+    """The benchmark cannot go on (node did not start, died, ...)."""
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench ros',
+                                 description='Node drops and latency at rising image rates.')
+    ap.add_argument('--rates', default=DEFAULT_RATES, help=f'Hz, comma separated '
+                    f'({DEFAULT_RATES})')
+    ap.add_argument('--frames', type=int, default=100, help='frames published per rate (100)')
+    ap.add_argument('--size', default='640x480', help='WxH (640x480)')
+    ap.add_argument('--boxes', type=int, default=2, help='moving boxes (2) + background')
+    ap.add_argument('--queue-size', type=int, default=None,
+                    help='node queue_size parameter (default: the node default)')
+    ap.add_argument('--startup-timeout', type=float, default=90.0)
+    ap.add_argument('--drain-timeout', type=float, default=60.0,
+                    help='max seconds to wait for the node to finish a rate')
+    ap.add_argument('--domain-id', type=int, default=None)
+    ap.add_argument('--quick', action='store_true',
+                    help='smoke run: 5 and 10 Hz, 4 frames of 320x240')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    args = ap.parse_args(list(argv))
+    if args.quick:
+        args.rates, args.frames, args.size = '5,10', 4, '320x240'
+    args.rate_list = [float(r) for r in args.rates.split(',') if r.strip()]
+    w, _, h = args.size.lower().partition('x')
+    args.wh = (int(w), int(h))
+    if not args.rate_list or min(args.rate_list) <= 0 or args.frames < 1:
+        ap.error('rates must be > 0 and --frames >= 1')
+    return args
+
+
+def read_stats(path: pathlib.Path) -> Optional[Dict[str, Any]]:
+    """The node's last stats dump, or None before the first one."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+class Bench:
+    """The publishing/receiving side; one instance per run (owns an rclpy context)."""
+
+    def __init__(self, args: argparse.Namespace, domain: int) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+        self.args = args
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node('mlofc_bench_ros', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.image_pub = self.node.create_publisher(Image, IMAGE_TOPIC, qos_profile_sensor_data)
+        self.info_pub = self.node.create_publisher(CameraInfo, INFO_TOPIC,
+                                                   qos_profile_sensor_data)
+        self.lock = threading.Lock()
+        self.received: Dict[int, float] = {}      # image stamp ns -> reception wall time
+        self.node.create_subscription(PointCloud2, SEG_TOPIC, self._on_segments,
+                                      QoSProfile(depth=500,
+                                                 reliability=ReliabilityPolicy.RELIABLE))
+        self._spin = threading.Thread(target=self._spin_loop, daemon=True)
+        self._stop = threading.Event()
+        self._spin.start()
+        self.Image, self.CameraInfo = Image, CameraInfo
+
+    def _spin_loop(self) -> None:
+        while not self._stop.is_set() and self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:  # noqa: B902 (shutdown races)
+                if self._stop.is_set():
+                    return
+                raise
+
+    def _on_segments(self, msg: Any) -> None:
+        now = time.time()
+        key = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+        with self.lock:
+            self.received[key] = now
+
+    def close(self) -> None:
+        import rclpy
+        self._stop.set()
+        self._spin.join(timeout=5.0)
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+    def make_messages(self, frames: Sequence[np.ndarray], camera: Any) -> None:
+        """Pre-build the Image (mono8) and CameraInfo messages; stamps are set on publishing."""
+        self.images = []
+        for f in frames:
+            m = self.Image()
+            m.header.frame_id = 'camera'
+            m.height, m.width = int(f.shape[0]), int(f.shape[1])
+            m.encoding, m.is_bigendian, m.step = 'mono8', 0, int(f.shape[1])
+            m.data = np.ascontiguousarray(f).tobytes()
+            self.images.append(m)
+        info = self.CameraInfo()
+        info.header.frame_id = 'camera'
+        info.height, info.width = int(frames[0].shape[0]), int(frames[0].shape[1])
+        info.distortion_model = 'plumb_bob'
+        info.d = [0.0] * 5
+        info.k = [camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]
+        info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+        info.p = [camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0,
+                  0.0, 0.0, 1.0, 0.0]
+        self.info = info
+
+    def publish_at(self, rate: float, n: int) -> Dict[str, Any]:
+        """Publish ``n`` frames at ``rate`` Hz on a steady schedule; return stamps and times."""
+        period = 1.0 / rate
+        stamps: List[int] = []
+        sent: List[float] = []
+        t_next = time.perf_counter()
+        for i in range(n):
+            delay = t_next - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            ns = time.time_ns()
+            msg = self.images[i % len(self.images)]
+            for m in (self.info, msg):
+                m.header.stamp.sec = ns // 1_000_000_000
+                m.header.stamp.nanosec = ns % 1_000_000_000
+            self.info_pub.publish(self.info)
+            self.image_pub.publish(msg)
+            stamps.append(ns)
+            sent.append(time.perf_counter())
+            t_next += period
+        return {'stamps': stamps, 'sent': sent}
+
+
+def _wait(cond: Any, timeout: float, step: float = 0.05) -> bool:
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        if cond():
+            return True
+        time.sleep(step)
+    return cond()
+
+
+def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
+    """Start the node, sweep the rates; returns the per-rate rows and run facts."""
+    from mlofc_ros.demo import fresh_domain_id, NodeProcess
+    from mlofc_ros.render import render_sequence
+
+    load = os.getloadavg()
+    domain = args.domain_id if args.domain_id is not None else fresh_domain_id()
+    common.eprint(f'ros: rendering {args.frames} frames {args.wh[0]}x{args.wh[1]}')
+    seq = render_sequence(args.boxes, min(args.frames, 120), size=args.wh,
+                          motion='camera_centre', background=True, noise_sigma=2.0, seed=0)
+    stats_path = work / 'node_stats.json'
+    command = [sys.executable, '-m', 'mlofc_ros.bench.ros', '--child', str(stats_path),
+               '--ros-args', '-r', f'__node:={NODE_NAME}', '-r', f'image:={IMAGE_TOPIC}',
+               '-r', f'camera_info:={INFO_TOPIC}', '-p', f'num_bodies:={args.boxes + 1}']
+    if args.queue_size is not None:
+        command += ['-p', f'queue_size:={args.queue_size}']
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
+               ROS_AUTOMATIC_DISCOVERY_RANGE=os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE',
+                                                            'LOCALHOST'),
+               HOME=os.environ.get('HOME', tempfile.gettempdir()))
+    saved = {k: os.environ.get(k) for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
+                                            'HOME')}
+    os.environ.update({k: env[k] for k in saved})
+    rows: List[Dict[str, Any]] = []
+    bench = None
+    try:
+        with NodeProcess(command, env, work / 'node.log') as proc:
+            bench = Bench(args, domain)
+            bench.make_messages(seq.frames, seq.camera)
+            t0 = time.monotonic()
+            up = _wait(lambda: (bench.image_pub.get_subscription_count() > 0
+                                and bench.node.count_publishers(SEG_TOPIC) > 0
+                                and read_stats(stats_path) is not None)
+                       or not proc.alive(), args.startup_timeout, 0.1)
+            if not up or not proc.alive():
+                raise BenchError(f'the node did not come up within {args.startup_timeout:g} s '
+                                 f'(ROS_DOMAIN_ID={domain}):\n{proc.log_tail()}')
+            startup = time.monotonic() - t0
+            common.eprint(f'ros: node up after {startup:.1f} s (ROS_DOMAIN_ID={domain})')
+            # warm-up (imports, first window) at a rate the node surely keeps up with
+            bench.publish_at(2.0, 4)
+            _drain(bench, stats_path, proc, args.drain_timeout)
+            for rate in args.rate_list:
+                rows.append(_one_rate(bench, stats_path, proc, rate, args))
+                r = rows[-1]
+                common.eprint(f'ros: {rate:g} Hz: {r["answered"]}/{r["published"]} answered, '
+                              f'{r["dropped"]} dropped, latency median {r["lat_median"]:.0f} '
+                              f'ms, p99 {r["lat_p99"]:.0f} ms')
+        return {'rows': rows, 'domain': domain, 'startup': startup, 'load': load,
+                'command': command, 'seq': seq}
+    finally:
+        if bench is not None:
+            bench.close()
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _drain(bench: Bench, stats_path: pathlib.Path, proc: Any, timeout: float) -> None:
+    """Wait until the node's queue is empty and no answer arrived for 0.5 s."""
+    last = {'n': -1, 't': time.monotonic()}
+
+    def idle() -> bool:
+        if not proc.alive():
+            raise BenchError(f'the node exited:\n{proc.log_tail()}')
+        with bench.lock:
+            n = len(bench.received)
+        now = time.monotonic()
+        if n != last['n']:
+            last['n'], last['t'] = n, now
+        s = read_stats(stats_path) or {}
+        return s.get('pending', 1) == 0 and now - last['t'] > 0.5 and \
+            now - s.get('time', 0) < 5.0 and time.time() - s.get('time', 0) < 1.0
+    _wait(idle, timeout, 0.05)
+
+
+def _one_rate(bench: Bench, stats_path: pathlib.Path, proc: Any, rate: float,
+              args: argparse.Namespace) -> Dict[str, Any]:
+    time.sleep(0.3)
+    before = read_stats(stats_path) or {}
+    pub = bench.publish_at(rate, args.frames)
+    _drain(bench, stats_path, proc, args.drain_timeout)
+    time.sleep(0.3)              # one more stats dump after the last frame
+    after = read_stats(stats_path) or {}
+    with bench.lock:
+        got = {s: bench.received[s] for s in pub['stamps'] if s in bench.received}
+    lat = np.array([1e3 * (t - s * 1e-9) for s, t in got.items()])
+    sent = pub['sent']
+    achieved = (len(sent) - 1) / (sent[-1] - sent[0]) if len(sent) > 1 else math.nan
+
+    def delta(k: str) -> int:
+        return int(after.get(k, 0)) - int(before.get(k, 0))
+    n0 = len(before.get('proc_wall', []))
+    proc_wall = np.asarray(after.get('proc_wall', [])[n0:], dtype=float)
+    proc_cpu = np.asarray(after.get('proc_cpu', [])[n0:], dtype=float)
+    published = len(pub['stamps'])
+    recv_times = sorted(got.values())
+    span = (recv_times[-1] - recv_times[0]) if len(recv_times) > 1 else math.nan
+    return {'rate': rate, 'achieved': achieved, 'published': published,
+            'received': delta('received'), 'answered': len(got), 'dropped': delta('dropped'),
+            'skipped': delta('skipped'), 'errors': delta('errors'),
+            'lost': published - delta('received'),
+            'out_rate': (len(got) - 1) / span if span and span > 0 else math.nan,
+            'lat_median': float(np.median(lat)) if lat.size else math.nan,
+            'lat_p99': float(np.percentile(lat, 99)) if lat.size else math.nan,
+            'lat_max': float(lat.max()) if lat.size else math.nan,
+            'proc_wall': float(np.median(proc_wall)) if proc_wall.size else math.nan,
+            'proc_cpu': float(np.median(proc_cpu)) if proc_cpu.size else math.nan}
+
+
+def kept_up(row: Dict[str, Any]) -> bool:
+    """Every published frame answered, none dropped by the node."""
+    return row['dropped'] == 0 and row['answered'] == row['published']
+
+
+def plot(path: pathlib.Path, rows: Sequence[Dict[str, Any]]) -> None:
+    fig, (a, b) = common.new_figure(2)
+    rates = [r['rate'] for r in rows]
+    common.plot_series(a, rates, {
+        'answered %': [100.0 * r['answered'] / r['published'] for r in rows],
+        'dropped by node %': [100.0 * r['dropped'] / r['published'] for r in rows]},
+        'image rate (Hz)', '% of published frames', 'answered / dropped')
+    a.legend(fontsize=7)
+    common.plot_series(b, rates, {'median': [r['lat_median'] for r in rows],
+                                  'p99': [r['lat_p99'] for r in rows]},
+                       'image rate (Hz)', 'stamp -> ~/segments (ms)', 'latency')
+    b.set_yscale('log')
+    common.save_figure(fig, path, legend_ax=b)
+
+
+def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, Any],
+                 wall: float) -> str:
+    from mlofc_ros import params
+    rows = res['rows']
+    queue = args.queue_size if args.queue_size is not None else \
+        params.PARAMS['queue_size'].default
+    head = common.run_header(
+        'ROS: the running node at rising image rates', common.command_line('ros', argv),
+        {'Node': f'separate process, `MlofcNode` via `python -m mlofc_ros.bench.ros --child` '
+                 f'(stats dump), `num_bodies:={args.boxes + 1}`, `queue_size` {queue}, other '
+                 f'parameters default; fresh ROS_DOMAIN_ID, localhost discovery; started in '
+                 f'{res["startup"]:.1f} s',
+         'Input': f'{args.wh[0]}x{args.wh[1]} rendered boxes + background, mono8, '
+                  f'{args.frames} frames per rate, sensor-data QoS, CameraInfo before each '
+                  'image; 4 warm-up frames at 2 Hz not counted',
+         'Code': f'node {common.git_revision("mlofc_ros/node.py")}, pipeline '
+                 f'{common.git_revision("mlofc_ros/pipeline.py")}, solver '
+                 f'{common.git_revision("mlofc_ros/solver")}',
+         'Wall time': f'{wall:.0f} s on a shared 2-core machine (bench and node compete for it)',
+         'Load average (1 min) at start / end':
+             f'{res["load"][0]:.1f} / {os.getloadavg()[0]:.1f}'})
+    best = None
+    for r in rows:
+        if not kept_up(r):
+            break
+        best = r
+    fastest = max((r['out_rate'] for r in rows if math.isfinite(r['out_rate'])),
+                  default=math.nan)
+    lines = [head, '## Headline', '']
+    if best is not None:
+        lines.append(f'- Highest rate kept up with (all frames answered, none dropped, and '
+                     f'the same at every lower rate): **{best["rate"]:g} Hz**; latency there '
+                     f'median **{best["lat_median"]:.0f} ms**, p99 {best["lat_p99"]:.0f} ms.')
+    else:
+        lines.append(f'- The node kept up with none of the rates (lowest '
+                     f'{rows[0]["rate"]:g} Hz).' if rows else '- No rate was run.')
+    lines += [f'- Highest answer rate seen: {fastest:.1f} segments messages/s (throughput '
+              'limit: above it the node drops the stalest queued frames).', '',
+              '## Per rate', '',
+              common.markdown_table(
+                  ['rate Hz', 'achieved Hz', 'published', 'node received', 'answered',
+                   'dropped (node queue)', 'lost before node', 'skipped', 'answers/s',
+                   'latency median ms', 'latency p99 ms', 'latency max ms',
+                   'process wall ms', 'process CPU ms', 'kept up'],
+                  [[r['rate'], r['achieved'], r['published'], r['received'], r['answered'],
+                    r['dropped'], r['lost'], r['skipped'], r['out_rate'], r['lat_median'],
+                    r['lat_p99'], r['lat_max'], r['proc_wall'], r['proc_cpu'],
+                    'yes' if kept_up(r) else 'no']
+                   for r in rows]),
+              "- published: images sent; node received / dropped / skipped: the node's own "
+              'counters (`MlofcNode.stats`) over the rate; lost before node = published - '
+              'received (best-effort transport); answered: `~/segments` messages received '
+              'for those stamps.',
+              '- latency: wall time at `~/segments` reception - image stamp (= wall time at '
+              "publication), over the answered frames; it includes waiting in the node's "
+              'queue, decode, `Pipeline.process`, packing and DDS both ways.',
+              '- process wall / CPU ms: median over the rate of `Pipeline.process` inside the '
+              "node, wall time and the worker thread's CPU time (`time.thread_time`); wall "
+              'well above CPU means the node waited for a core (shared machine) or the GIL.', '',
+              '![drops and latency](ros.png)', '']
+    return '\n'.join(lines)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    argv = list(argv or [])
+    if argv[:1] == ['--child']:
+        rest = argv[2:]
+        if rest[:1] == ['--']:
+            rest = rest[1:]
+        return child_main(argv[1], rest)
+    args = parse_args(argv)
+    out = common.results_dir(args.out)
+    t0 = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix='mlofc_bench_ros_') as tmp:
+        try:
+            res = run(args, pathlib.Path(tmp))
+        except BenchError as exc:
+            print(f'bench ros: error: {exc}', file=sys.stderr)
+            return 1
+    report = build_report(args, argv, res, time.monotonic() - t0)
+    plot(out / 'ros.png', res['rows'])
+    (out / 'ros.md').write_text(report)
+    print(report)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,63 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Smoke runs of ``python -m mlofc_ros.bench pipeline|ros|soak --quick``: each writes a report."""
+import os
+import pathlib
+import tempfile
+
+import pytest
+
+from mlofc_ros.bench import pipeline, soak
+
+
+def test_pipeline_quick_writes_report(tmp_path: pathlib.Path) -> None:
+    assert pipeline.main(['--quick', '--out', str(tmp_path)]) == 0
+    text = (tmp_path / 'pipeline.md').read_text()
+    assert 'python -m mlofc_ros.bench pipeline --quick' in text
+    assert '## Stages (median / p95 ms per frame)' in text
+    assert 'rendered 320x240' in text and 'process / LSD' in text
+    png = tmp_path / 'pipeline.png'
+    assert png.is_file() and png.stat().st_size > 1000
+
+
+def test_read_visp_camera(tmp_path: pathlib.Path) -> None:
+    xml = tmp_path / 'cube.xml'
+    xml.write_text('<conf><camera>\n<u0>338.5</u0> <v0>234.5</v0>\n<px>547.7</px>'
+                   '<py>542.0</py></camera></conf>')
+    assert pipeline.read_visp_camera(str(xml)) == (547.7, 542.0, 338.5, 234.5)
+    xml.write_text('<conf><camera><u0>1</u0></camera></conf>')
+    assert pipeline.read_visp_camera(str(xml)) is None
+    assert pipeline.read_visp_camera(str(tmp_path / 'missing.xml')) is None
+
+
+def test_soak_quick_writes_report(tmp_path: pathlib.Path) -> None:
+    assert soak.main(['--quick', '--out', str(tmp_path)]) == 0
+    text = (tmp_path / 'soak.md').read_text()
+    assert 'Status: complete. 40 frames' in text
+    assert 'Growth end - start' in text
+    assert soak.rss_mb() > 1.0
+
+
+def test_ros_quick_writes_report(tmp_path: pathlib.Path) -> None:
+    pytest.importorskip('rclpy')
+    from mlofc_ros.bench import ros
+    os.environ.setdefault('HOME', tempfile.gettempdir())
+    assert ros.main(['--quick', '--out', str(tmp_path)]) == 0
+    text = (tmp_path / 'ros.md').read_text()
+    assert '## Per rate' in text and 'kept up' in text
+    # both rates ran, and at 5 Hz the node answered at least one 320x240 frame
+    rows = [ln for ln in text.splitlines() if ln.startswith('| 5 |') or ln.startswith('| 10 |')]
+    assert len(rows) == 2
+    assert int(rows[0].split('|')[5]) >= 1
+    assert (tmp_path / 'ros.png').is_file()
