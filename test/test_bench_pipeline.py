@@ -44,7 +44,7 @@ def test_read_visp_camera(tmp_path: pathlib.Path) -> None:
 def test_soak_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert soak.main(['--quick', '--out', str(tmp_path)]) == 0
     text = (tmp_path / 'soak.md').read_text()
-    assert 'Status: complete. 40 frames' in text
+    assert 'Status: complete. 20 frames' in text
     assert 'Growth end - start' in text
     assert soak.rss_mb() > 1.0
 

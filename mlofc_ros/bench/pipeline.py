@@ -188,11 +188,11 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--real-frames', type=int, default=80, help='max frames per real sequence')
     ap.add_argument('--method', default=None, help='solver method (default: the default)')
     ap.add_argument('--quick', action='store_true',
-                    help='smoke run: 8 frames of 320x240, no real sequence')
+                    help='smoke run: 7 frames of 320x240, no real sequence')
     ap.add_argument('--out', default=None, help='output folder (default docs/results)')
     args = ap.parse_args(list(argv))
     if args.quick:
-        args.sizes, args.frames, args.real_frames = '320x240', 8, 0
+        args.sizes, args.frames, args.real_frames = '320x240', 7, 0
     args.wh = []
     for s in args.sizes.split(','):
         w, sep, h = s.strip().lower().partition('x')

@@ -60,11 +60,11 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--loop', type=int, default=60, help='frames rendered and looped (60)')
     ap.add_argument('--seed', type=int, default=0)
     ap.add_argument('--quick', action='store_true',
-                    help='smoke run: 40 frames of 320x240, sample every 10')
+                    help='smoke run: 20 frames of 320x240, sample every 10')
     ap.add_argument('--out', default=None, help='output folder (default docs/results)')
     args = ap.parse_args(list(argv))
     if args.quick:
-        args.frames, args.every, args.size, args.loop = 40, 10, '320x240', 12
+        args.frames, args.every, args.size, args.loop = 20, 10, '320x240', 12
     w, _, h = args.size.lower().partition('x')
     args.wh = (int(w), int(h))
     if args.frames < 1 or args.every < 1 or args.loop < 2:
