@@ -134,8 +134,9 @@ def run_sequence(seq: Sequence_, method: Optional[str] = None) -> Dict[str, np.n
     lsd = cv2.createLineSegmentDetector()
     rows: Dict[str, List[float]] = {k: [] for k in (
         'decode', 'decode_bgr8', 'detect_track', 'undistort', 'window', 'solve', 'other',
-        'total', 'pack', 'end_to_end', 'lsd', 'segments', 'tracks', 'solved')}
-    clock = time.perf_counter
+        'total', 'pack', 'end_to_end', 'lsd', 'total_cpu', 'lsd_cpu', 'segments', 'tracks',
+        'solved')}
+    clock, cpu = time.perf_counter, time.thread_time
     for gray, stamp in zip(seq.frames, seq.stamps):
         mono = image_message(gray, 'mono8')
         bgr = image_message(cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR), 'bgr8')
@@ -145,13 +146,16 @@ def run_sequence(seq: Sequence_, method: Optional[str] = None) -> Dict[str, np.n
         t = clock()
         image_msg_to_gray(bgr)
         rows['decode_bgr8'].append((clock() - t) * 1e3)
+        c = cpu()
         r = pipe.process(decoded, stamp, seq.camera)
+        rows['total_cpu'].append((cpu() - c) * 1e3)
         t = clock()
         segment_cloud_fields(r.segments, r.track_ids, r.labels, r.residuals)
         pack = (clock() - t) * 1e3
-        t = clock()
+        t, c = clock(), cpu()
         lsd.detect(gray)
         rows['lsd'].append((clock() - t) * 1e3)
+        rows['lsd_cpu'].append((cpu() - c) * 1e3)
         tm = r.timings
         rows['decode'].append(decode)
         rows['pack'].append(pack)
@@ -202,26 +206,42 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     return args
 
 
-def plot(path: 'os.PathLike', names: Sequence[str], med: Dict[str, Dict[str, float]]) -> None:
-    """Stacked bars of the median stage times per sequence, LSD alone next to each."""
-    fig, (ax,) = common.new_figure(1, width_per_panel=max(6.0, 1.6 * len(names)), height=4.2)
-    x = np.arange(len(names))
-    bottom = np.zeros(len(names))
-    for i, (key, label) in enumerate(STAGES):
-        vals = np.array([med[n][key] for n in names])
-        ax.bar(x - 0.2, vals, 0.38, bottom=bottom, label=label, color=f'C{i}')
-        bottom += vals
-    ax.bar(x + 0.2, [med[n]['lsd'] for n in names], 0.38, label='LSD alone (reference)',
-           color='0.45', hatch='//')
-    for xi, n in zip(x, names):
-        ax.text(xi - 0.2, bottom[list(names).index(n)], f'{med[n]["ratio"]:.2f}x',
-                ha='center', va='bottom', fontsize=8)
-    ax.set_xticks(x)
-    ax.set_xticklabels([n.replace('rendered ', 'rendered\n') for n in names], fontsize=8)
-    ax.set_ylabel('median ms per frame (stages stacked)')
-    ax.set_title('pipeline stages vs LSD alone (label: Pipeline.process / LSD)', fontsize=10)
-    ax.grid(True, axis='y', alpha=0.3)
-    common.save_figure(fig, path, legend_ax=ax)
+def plot(path: 'os.PathLike', names: Sequence[str], med: Dict[str, Dict[str, float]],
+         estimated_f: Sequence[bool]) -> None:
+    """Stacked bars of the median stage times per sequence, LSD alone next to each.
+
+    Sequences with a known camera and those whose focal length is estimated (much slower
+    solver) go on separate panels, each with its own scale.
+    """
+    groups = [[n for n, e in zip(names, estimated_f) if not e],
+              [n for n, e in zip(names, estimated_f) if e]]
+    groups = [g for g in groups if g]
+    fig, axes = common.new_figure(len(groups), width_per_panel=max(4.5, 1.7 * max(map(
+        len, groups))), height=4.2)
+    for gi, (ax, group) in enumerate(zip(axes, groups)):
+        x = np.arange(len(group))
+        bottom = np.zeros(len(group))
+        for i, (key, label) in enumerate(STAGES):
+            vals = np.array([med[n][key] for n in group])
+            ax.bar(x - 0.2, vals, 0.38, bottom=bottom, label=label, color=f'C{i}')
+            bottom += vals
+        ax.bar(x + 0.2, [med[n]['lsd'] for n in group], 0.38, label='LSD alone (reference)',
+               color='0.45', hatch='//')
+        for k, n in enumerate(group):
+            ax.text(x[k] - 0.2, bottom[k], f'{med[n]["ratio"]:.2f}x', ha='center',
+                    va='bottom', fontsize=8)
+        ax.set_xticks(x)
+        ax.set_xticklabels([n.replace('rendered ', 'rendered\n') for n in group], fontsize=8)
+        ax.set_ylabel('median ms per frame (stages stacked)')
+        known = med[group[0]].get('estimated_f') is False
+        ax.set_title(('camera given' if known else 'focal length estimated')
+                     + ' (label: process / LSD)', fontsize=10)
+        ax.grid(True, axis='y', alpha=0.3)
+        top = max(float(bottom.max()), max(med[n]['lsd'] for n in group))
+        ax.set_ylim(0, 1.45 * top)       # room for the legend above the bars
+        if gi == 0:
+            ax.legend(fontsize=7, loc='upper left', ncol=2)
+    common.save_figure(fig, path)
 
 
 def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[Sequence_],
@@ -248,7 +268,10 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
         rows.append([s.name, f'{w}x{h}', len(r['total']), s.num_bodies, cam,
                      _med(r['tracks']), _med(r['total']), _p95(r['total']),
                      _med(r['end_to_end']), _med(r['lsd']), _p95(r['lsd']), ratio,
-                     _med(r['end_to_end']) / _med(r['lsd'])])
+                     _med(r['end_to_end']) / _med(r['lsd']), _med(r['total_cpu']),
+                     _med(r['lsd_cpu']), _med(r['total_cpu']) / _med(r['lsd_cpu']),
+                     _med(r['detect_track']) / _med(r['lsd']),
+                     _med(r['solve']) / _med(r['total'])])
         stage_rows.append([s.name] + [f'{_med(r[k]):.3g} / {_p95(r[k]):.3g}' for k in (
             'decode', 'decode_bgr8', 'detect_track', 'undistort', 'window', 'other', 'solve',
             'pack', 'total', 'lsd')])
@@ -260,14 +283,24 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
                   f'- {first[0]}: `Pipeline.process` median **{first[6]:.1f} ms** (p95 '
                   f'{first[7]:.1f}), LSD alone {first[9]:.1f} ms on the same frames: ratio '
                   f'**{first[11]:.2f}** (goal <= {GOAL_RATIO:g}: {verdict}); decode + process + '
-                  f'pack {first[8]:.1f} ms.', '']
+                  f'pack {first[8]:.1f} ms.',
+                  f'- Same frames in CPU time (`time.thread_time`, less sensitive to the load '
+                  f'of the shared machine): process {first[13]:.1f} ms, LSD {first[14]:.1f} ms, '
+                  f'ratio **{first[15]:.2f}**.',
+                  f'- The front end alone (detect/track) is {first[16]:.2f} x LSD; the solver '
+                  f'takes {100 * first[17]:.0f} % of `Pipeline.process` (median ratio).', '']
     lines += ['## Whole pipeline vs LSD', '',
               common.markdown_table(
                   ['sequence', 'size', 'frames', 'bodies', 'camera', 'tracks (median)',
                    'process median ms', 'process p95 ms', 'decode+process+pack median ms',
-                   'LSD median ms', 'LSD p95 ms', 'process / LSD', 'end-to-end / LSD'], rows),
+                   'LSD median ms', 'LSD p95 ms', 'process / LSD', 'end-to-end / LSD',
+                   'process CPU ms', 'LSD CPU ms', 'process / LSD (CPU)',
+                   'detect/track / LSD', 'solve share'], rows),
               f'Statistics over frames >= {skip} (the first `window` frames fill the window). '
-              'Ratios are of medians. `process` is `Pipeline.process` (`timings["total"]`).', '',
+              'Ratios are of medians. `process` is `Pipeline.process` (`timings["total"]`); CPU '
+              'columns are the same calls timed with `time.thread_time` (the machine is shared: '
+              'wall time includes waiting for a core). Solve share = median solve / median '
+              'process.', '',
               '## Stages (median / p95 ms per frame)', '',
               common.markdown_table(
                   ['sequence', 'decode mono8', 'decode bgr8', 'detect/track', 'undistort',
@@ -285,7 +318,9 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
          {s.name: dict({k: _med(_steady(res[s.name][k], skip)) for k, _ in STAGES},
                        lsd=_med(_steady(res[s.name]['lsd'], skip)),
                        ratio=_med(_steady(res[s.name]['total'], skip))
-                       / _med(_steady(res[s.name]['lsd'], skip))) for s in seqs})
+                       / _med(_steady(res[s.name]['lsd'], skip)),
+                       estimated_f=s.camera is None) for s in seqs},
+         [s.camera is None for s in seqs])
     return '\n'.join(lines)
 
 
