@@ -1,0 +1,1041 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Accuracy of the solver: robust vs the floor, outliers, frames, number of bodies, speed.
+
+``python -m mlofc_ros.bench accuracy [--trials 50] [--quick] [--out DIR] [--jobs 2]
+[--seed 4711] [--sections speed,floor,outliers,frames,nbodies]`` writes ``accuracy.md`` and
+``accuracy_*.png`` to ``docs/results/`` (or ``--out``) and prints the report.
+
+1. floor: the paper's protocol (two views, 1000 x 1000 px, 20 lines/body for n = 2, 30 for
+   n = 3, 4) at 0.5, 1, 2 px: every method of :data:`mlofc_ros.solver.METHODS` against the
+   two floors (every line assigned with the TRUE motions, unweighted and weighted residual).
+2. outliers: 15 % of the tracks replaced by tracks that follow no rigid motion, 1 px,
+   n = 2, 3, K = 2, 5: inlier misclassification, rejection rates, angular-velocity error.
+3. frames: K = 2, 3, 5, 8 views at 1 and 2 px, n = 3.
+4. nbodies: ``n_bodies=0`` (automatic) for n = 1 .. 4, K = 2 and 5, 1 px.
+5. speed: wall and CPU time of ``segment_lines`` ('robust', 'algebraic') vs the number of
+   lines, n = 3, K = 5, 1 px, with a fixed numpy workload timed in between as the reference.
+
+The speed section runs first, in this process, single-threaded (``import mlofc_ros`` sets
+``OPENBLAS_NUM_THREADS=1`` before numpy loads), before the worker pool of the other sections
+exists. Every runner of a section sees the same scenes (seeds fixed by section, point and trial).
+"""
+import argparse
+from dataclasses import dataclass
+import math
+import multiprocessing
+import os
+import pathlib
+import time
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import mlofc_ros  # noqa: F401 (first of the package: one BLAS thread, set before numpy loads)
+
+import numpy as np  # noqa: I100 (numpy must load after mlofc_ros, see above)
+
+from mlofc_ros.bench import common
+from mlofc_ros.synthetic import make_scene
+
+FLOOR = 'floor (unweighted)'
+FLOOR_W = 'floor (weighted)'
+ORACLE = 'true-label fit'
+AUTO = 'robust (n auto)'
+SECTIONS = ('speed', 'floor', 'outliers', 'frames', 'nbodies')
+SECTION_NO = {'floor': 1, 'outliers': 2, 'frames': 3, 'nbodies': 4, 'speed': 5}
+COLORS = {'algebraic': 'C0', 'kmeans': 'C1', 'algebraic+kmeans': 'C2', 'robust': 'C3',
+          ORACLE: 'C4'}
+
+#: Lines per body of the paper's protocol (section 4.1: 20 for two bodies, 30 for three).
+LINES_PER_BODY = {1: 20, 2: 20, 3: 30, 4: 30}
+#: Fraction of tracks replaced by outliers, and the range of the jitter outliers (px).
+OUTLIER_FRACTION = 0.15
+MIXES = ('mixed', 'jitter', 'stitched')
+JITTER_PX = (10.0, 30.0)
+
+#: Goals of the accuracy issue.
+GOAL_FLOOR_RATIO = 1.00
+GOAL_OUTLIER_POINTS = 5.0
+GOAL_OMEGA_PCT = 15.0
+GOAL_FRAMES_RATIO = 0.5
+GOAL_NBODIES_PCT = 95.0
+GOAL_MS_200 = 3.0
+#: A trial counts as broken when the robust inlier misclassification exceeds this fraction.
+BROKEN = 0.2
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Sweep values of every section (full run or ``--quick``)."""
+
+    floor_n: Tuple[int, ...] = (2, 3, 4)
+    floor_noise: Tuple[float, ...] = (0.5, 1.0, 2.0)
+    outlier_n: Tuple[int, ...] = (2, 3)
+    outlier_k: Tuple[int, ...] = (2, 5)
+    frames_k: Tuple[int, ...] = (2, 3, 5, 8)
+    frames_noise: Tuple[float, ...] = (1.0, 2.0)
+    frames_n: int = 3
+    nbodies_n: Tuple[int, ...] = (1, 2, 3, 4)
+    nbodies_k: Tuple[int, ...] = (2, 5)
+    speed_lines: Tuple[int, ...] = (50, 100, 200, 500, 1000, 2000)
+    speed_scenes: int = 5
+    speed_reps: int = 4
+
+
+QUICK_GRID = Grid(floor_n=(2, 3), floor_noise=(1.0,), outlier_n=(2,), outlier_k=(2,),
+                  frames_k=(2, 5), frames_noise=(1.0,), nbodies_n=(1, 2), nbodies_k=(2,),
+                  speed_lines=(50, 200), speed_scenes=1, speed_reps=2)
+
+
+@dataclass(frozen=True)
+class Task:
+    """One scene of a section and what runs on it; ``key`` locates the sweep point."""
+
+    section: str
+    key: Tuple
+    trial: int
+    seed: int
+    methods: Tuple[str, ...] = ('robust',)
+
+
+Record = Dict[str, object]
+Raw = Dict[Tuple[str, Tuple, str], List[Record]]
+
+
+# --------------------------------------------------------------------------------------------
+# scenes
+
+
+def add_outliers(tracks: np.ndarray, fraction: float, rng: np.random.Generator,
+                 mix: str = 'mixed') -> Tuple[np.ndarray, np.ndarray]:
+    """Replace a fraction of the tracks by tracks that follow no rigid motion.
+
+    *Jitter* outliers: every endpoint of every frame of the track moved by a distance uniform
+    in :data:`JITTER_PX` in a uniform direction, independently. *Stitched* outliers: frame ``k``
+    of the track is frame ``k`` of another line of the scene, a different line for every frame
+    (a tracker's association error). ``mix='mixed'`` makes half of the outliers (rounded up)
+    jitter and the others stitched; ``'jitter'`` or ``'stitched'`` only one kind.
+
+    Parameters
+    ----------
+    tracks : (N, K, 4) float
+        Line tracks (pixels).
+    fraction : float
+        Fraction of the tracks to replace (rounded to a whole number of tracks).
+    rng : numpy Generator
+    mix : {'mixed', 'jitter', 'stitched'}
+
+    Returns
+    -------
+    tracks : (N, K, 4) float64
+        A copy with the outliers in place.
+    kind : (N,) int64
+        0 = inlier (unchanged), 1 = jitter outlier, 2 = stitched outlier.
+    """
+    src = np.asarray(tracks, dtype=np.float64)
+    n_tracks, n_frames = src.shape[:2]
+    out = src.copy()
+    kind = np.zeros(n_tracks, dtype=np.int64)
+    m = int(round(fraction * n_tracks))
+    idx = rng.choice(n_tracks, size=m, replace=False)
+    if mix not in MIXES:
+        raise ValueError(f'mix must be one of {MIXES}, got {mix!r}')
+    n_jit = {'mixed': (m + 1) // 2, 'jitter': m, 'stitched': 0}[mix]
+    jit, sti = idx[:n_jit], idx[n_jit:]
+    mag = rng.uniform(JITTER_PX[0], JITTER_PX[1], size=(jit.size, n_frames, 2))
+    ang = rng.uniform(0.0, 2.0 * math.pi, size=mag.shape)
+    disp = np.stack([mag * np.cos(ang), mag * np.sin(ang)], axis=-1)  # (J, K, 2 ends, uv)
+    out[jit] += disp.reshape(jit.size, n_frames, 4)
+    kind[jit] = 1
+    for i in sti:  # a few tracks per scene: benchmark code, not the solver
+        others = rng.choice(n_tracks - 1, size=n_frames, replace=n_frames > n_tracks - 1)
+        others[others >= i] += 1
+        out[i] = src[others, np.arange(n_frames)]
+    kind[sti] = 2
+    return out, kind
+
+
+def _split_lines(total: int, n: int) -> List[int]:
+    """``total`` lines over ``n`` bodies as evenly as possible."""
+    return [total // n + (1 if i < total % n else 0) for i in range(n)]
+
+
+def _seed(base: int, section: str, indices: Sequence[int]) -> int:
+    ss = np.random.SeedSequence([base, SECTION_NO[section], *indices])
+    return int(ss.generate_state(1)[0])
+
+
+def make_tasks(sections: Sequence[str], grid: Grid, trials: int, seed: int,
+               methods: Sequence[str] = ('robust',)) -> List[Task]:
+    """Scenes of the accuracy sections; seeds depend only on (seed, section, point, trial).
+
+    ``methods`` run in sections 1 and 2 (the other sections run 'robust' only).
+    """
+    tasks = []
+
+    def add(section: str, key: Tuple, idx: Tuple[int, ...]) -> None:
+        for t in range(trials):
+            tasks.append(Task(section, key, t, _seed(seed, section, (*idx, t)), tuple(methods)))
+
+    if 'floor' in sections:
+        for n in grid.floor_n:
+            for s in grid.floor_noise:
+                add('floor', (n, s), (n, int(round(100 * s))))
+    if 'outliers' in sections:
+        for n in grid.outlier_n:
+            for k in grid.outlier_k:
+                for mix in MIXES:  # the same inlier scenes for every mix
+                    add('outliers', (n, k, mix), (n, k))
+    if 'frames' in sections:
+        for k in grid.frames_k:
+            for s in grid.frames_noise:
+                add('frames', (k, s), (k, int(round(100 * s))))
+    if 'nbodies' in sections:
+        for k in grid.nbodies_k:
+            for n in grid.nbodies_n:
+                add('nbodies', (k, n), (k, n))
+    return tasks
+
+
+# --------------------------------------------------------------------------------------------
+# running and scoring
+
+
+def _timed(fn: Callable[[], object]) -> Tuple[Optional[object], Optional[str], float]:
+    """Call ``fn``; returns (result or None, error text or None, CPU seconds)."""
+    c0 = time.process_time()
+    try:
+        res, err = fn(), None
+    except Exception as exc:  # noqa: B902 (a failing method is a result, not a crash)
+        res, err = None, f'{type(exc).__name__}: {exc}'
+    return res, err, time.process_time() - c0
+
+
+def _failed(err: str, cpu: float) -> Record:
+    return {'miscl': 1.0, 'rel': math.nan, 'in_rej': math.nan, 'out_rej': math.nan,
+            'rej_jitter': math.nan, 'rej_stitched': math.nan, 'unassigned': 1.0,
+            'failed': 1, 'error': err, 'cpu': cpu}
+
+
+def _score(labels: np.ndarray, w_est: Optional[np.ndarray], truth: np.ndarray,
+           w_true: np.ndarray, kind: Optional[np.ndarray] = None) -> Record:
+    """Misclassification (over the inliers; ``-1`` wrong), rejections, relative w error."""
+    labels = np.asarray(labels, dtype=np.int64)
+    n = w_true.shape[0]
+    inl = np.ones(labels.shape[0], bool) if kind is None else kind == 0
+    perm, errors = common.best_permutation(labels[inl], truth[inl], n)
+    rec: Record = {'miscl': errors / max(int(inl.sum()), 1),
+                   'unassigned': float(np.mean(labels < 0)),
+                   'in_rej': float(np.mean(labels[inl] < 0)), 'failed': 0}
+    rec['rel'] = (common.motion_errors(w_est, w_true, perm)[0]
+                  if w_est is not None and np.shape(w_est)[0] == n else math.nan)
+    for name, code in (('out_rej', None), ('rej_jitter', 1), ('rej_stitched', 2)):
+        sel = (~inl if code is None else kind == code) if kind is not None else np.zeros(0, bool)
+        rec[name] = float(np.mean(labels[sel] < 0)) if np.any(sel) else math.nan
+    return rec
+
+
+def _oracle_fit(tracks: np.ndarray, truth: np.ndarray, n: int,
+                intrinsics: Sequence[float]) -> np.ndarray:
+    """Fit the solver's model to the lines with their TRUE labels (weighted least squares).
+
+    Returns the angular velocities ``(n, 3)`` in rad/frame: the reference for the motion error.
+    """
+    from mlofc_ros.solver.lines import cayley_to_rotvec, line_flows
+    from mlofc_ros.solver.models import fit_bodies
+    c, _ = fit_bodies(line_flows(np.asarray(tracks, np.float64), tuple(intrinsics)), truth, n,
+                      weighted=True)
+    return cayley_to_rotvec(c)
+
+
+def _run_fixed_n(tracks: np.ndarray, scene: object, runners: Sequence[str], seed: int,
+                 kind: Optional[np.ndarray] = None) -> Dict[str, Record]:
+    """Run ``runners`` (methods, floors, oracle) with the true number of bodies and score."""
+    from mlofc_ros.solver import assign_with_motions, segment_lines
+    n = scene.n_bodies
+    w_true = scene.angular_velocities
+    inl = np.ones(tracks.shape[0], bool) if kind is None else kind == 0
+    out: Dict[str, Record] = {}
+    for name in runners:
+        if name == ORACLE:
+            w, err, cpu = _timed(lambda: _oracle_fit(tracks[inl], scene.labels[inl], n,
+                                                     scene.intrinsics))
+            rec = _failed(err, cpu) if err else {
+                'miscl': math.nan, 'rel': common.motion_errors(w, w_true, range(n))[0],
+                'failed': 0, 'cpu': cpu}
+            out[name] = rec
+            continue
+        if name in (FLOOR, FLOOR_W):
+            def call(name: str = name) -> object:
+                return assign_with_motions(tracks, w_true, intrinsics=scene.intrinsics,
+                                           weighted=name == FLOOR_W)
+        else:
+            def call(name: str = name) -> object:
+                return segment_lines(tracks, n, intrinsics=scene.intrinsics,
+                                     image_size=scene.image_size, method=name, seed=seed)
+        res, err, cpu = _timed(call)
+        if err:
+            out[name] = _failed(err, cpu)
+            continue
+        w_est = None if name in (FLOOR, FLOOR_W) else res.angular_velocities
+        rec = _score(res.labels, w_est, scene.labels, w_true, kind)
+        rec['cpu'] = cpu
+        out[name] = rec
+    return out
+
+
+def run_task(task: Task) -> Tuple[Task, Dict[str, Record]]:
+    """Build the task's scene and run every runner of its section on it (worker function)."""
+    from mlofc_ros.solver import segment_lines
+    sec, key, methods = task.section, task.key, task.methods
+    try:
+        if sec == 'floor':
+            n, noise = key
+            scene = make_scene(n, LINES_PER_BODY[n], n_frames=2, noise_px=noise, seed=task.seed)
+        elif sec == 'outliers':
+            n, k, _ = key
+            scene = make_scene(n, LINES_PER_BODY[n], n_frames=k, noise_px=1.0, seed=task.seed)
+        elif sec == 'frames':
+            k, noise = key
+            scene = make_scene(3, LINES_PER_BODY[3], n_frames=k, noise_px=noise,
+                               seed=task.seed)
+        else:
+            k, n = key
+            scene = make_scene(n, LINES_PER_BODY[n], n_frames=k, noise_px=1.0, seed=task.seed)
+    except ValueError as exc:
+        return task, {'_scene': {'error': f'scene: {exc}'}}
+    if sec == 'floor':
+        return task, _run_fixed_n(scene.tracks, scene, (*methods, FLOOR, FLOOR_W), task.trial)
+    if sec == 'outliers':
+        rng = np.random.default_rng(np.random.SeedSequence([task.seed, 1]))
+        tracks, kind = add_outliers(scene.tracks, OUTLIER_FRACTION, rng, key[2])
+        runners = (*methods, FLOOR, FLOOR_W, ORACLE) if key[2] == 'mixed' else (
+            'robust', FLOOR, FLOOR_W, ORACLE)
+        return task, _run_fixed_n(tracks, scene, runners, task.trial, kind)
+    if sec == 'frames':
+        return task, _run_fixed_n(scene.tracks, scene, ('robust', FLOOR, FLOOR_W, ORACLE),
+                                  task.trial)
+    # nbodies: automatic choice of n
+    res, err, cpu = _timed(lambda: segment_lines(scene.tracks, 0, intrinsics=scene.intrinsics,
+                                                 image_size=scene.image_size,
+                                                 method='robust', seed=task.trial))
+    if err:
+        return task, {AUTO: dict(_failed(err, cpu), n_est=0)}
+    n_true, n_est = scene.n_bodies, res.n_bodies
+    _, errors = common.best_permutation(res.labels, scene.labels, max(n_true, n_est))
+    return task, {AUTO: {'miscl': errors / scene.labels.shape[0], 'n_est': n_est,
+                         'failed': 0, 'cpu': cpu}}
+
+
+def run_tasks(tasks: Sequence[Task], jobs: int) -> Tuple[Raw, Dict[str, List[str]], float]:
+    """Run every task (``jobs`` worker processes); raw records per (section, key, runner)."""
+    order = sorted(tasks, key=lambda t: -_cost(t))  # biggest first so the pool ends evenly
+    t0 = time.perf_counter()
+    results = []
+    if jobs > 1 and len(order) >= 4 * jobs:
+        ctx = multiprocessing.get_context('fork' if os.name == 'posix' else 'spawn')
+        with ctx.Pool(jobs) as pool:
+            for i, res in enumerate(pool.imap_unordered(run_task, order, chunksize=2)):
+                results.append(res)
+                if (i + 1) % max(1, len(order) // 10) == 0:
+                    common.eprint(f'  {i + 1}/{len(order)} scenes, '
+                                  f'{time.perf_counter() - t0:.0f} s')
+    else:
+        results = [run_task(t) for t in order]
+    raw: Raw = {}
+    errors: Dict[str, List[str]] = {}
+    for task, out in results:
+        for name, rec in out.items():
+            raw.setdefault((task.section, task.key, name), []).append(rec)
+            if 'error' in rec:
+                errors.setdefault(f'{name}, {task.section} {task.key}', []).append(
+                    str(rec['error']))
+    return raw, errors, time.perf_counter() - t0
+
+
+def _cost(task: Task) -> float:
+    """Rough relative cost of a task (for scheduling)."""
+    a, b = task.key[:2]
+    if task.section == 'nbodies':
+        return 6.0 * a * b
+    if task.section == 'frames':
+        return 3.0 * a
+    return 4.0 * a * (b if task.section == 'outliers' else 2)
+
+
+# --------------------------------------------------------------------------------------------
+# speed
+
+
+def _reference_data() -> Tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(12345)
+    return rng.normal(size=(4000, 12)), rng.normal(size=50_000)
+
+
+def reference_workload(data: Tuple[np.ndarray, np.ndarray]) -> float:
+    """Run a fixed numpy workload (~ the solver's mix of small BLAS/LAPACK and elementwise work).
+
+    QR and normal equations of a 4000 x 12 matrix, an SVD of the 12 x 12 product, row norms,
+    and exp / sort of 50 000 numbers. Its time tracks how fast this machine runs numpy right
+    now, so solver times are also reported as ratios to it.
+    """
+    a, v = data
+    q, r = np.linalg.qr(a)
+    g = a.T @ a
+    s = np.linalg.svd(g, compute_uv=False)
+    rows = np.einsum('ij,ij->i', a, a)
+    e = np.exp(-np.abs(v)).sum() + np.sort(v)[len(v) // 2]
+    return float(s[0] + rows.sum() + e + abs(r[0, 0]) + q[0, 0])
+
+
+def run_speed(grid: Grid, seed: int) -> Dict[int, Dict[str, Dict[str, np.ndarray]]]:
+    """Time the reference, 'algebraic' and 'robust' interleaved, per number of lines.
+
+    For each N: ``grid.speed_scenes`` scenes (n = 3, K = 5, 1 px), one warm-up call each, then
+    ``grid.speed_reps`` rounds of (reference, algebraic, robust). Returns per N and runner the
+    wall and CPU seconds of every timed call.
+    """
+    from mlofc_ros.solver import segment_lines
+    data = _reference_data()
+    reference_workload(data)
+    out: Dict[int, Dict[str, Dict[str, np.ndarray]]] = {}
+    for n_lines in grid.speed_lines:
+        scenes = [make_scene(3, _split_lines(n_lines, 3), n_frames=5, noise_px=1.0,
+                             seed=_seed(seed, 'speed', (n_lines, s)))
+                  for s in range(grid.speed_scenes)]
+        calls = {'reference': lambda sc: reference_workload(data)}
+        for m in ('algebraic', 'robust'):
+            calls[m] = (lambda sc, m=m: segment_lines(sc.tracks, 3, intrinsics=sc.intrinsics,
+                                                      image_size=sc.image_size, method=m,
+                                                      seed=0))
+        wall = {name: [] for name in calls}
+        cpu = {name: [] for name in calls}
+        for sc in scenes:
+            for fn in calls.values():
+                fn(sc)
+            for _ in range(grid.speed_reps):
+                for name, fn in calls.items():
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    fn(sc)
+                    cpu[name].append(time.process_time() - c0)
+                    wall[name].append(time.perf_counter() - t0)
+        out[n_lines] = {name: {'wall': np.array(wall[name]), 'cpu': np.array(cpu[name])}
+                        for name in calls}
+        common.eprint(f'  speed N={n_lines}: robust '
+                      f'{1000 * np.median(cpu["robust"]):.1f} ms CPU, algebraic '
+                      f'{1000 * np.median(cpu["algebraic"]):.1f} ms CPU, reference '
+                      f'{1000 * np.median(cpu["reference"]):.2f} ms CPU')
+    return out
+
+
+def _slope(ns: Sequence[float], ms: Sequence[float]) -> float:
+    """Least-squares slope of log(ms) against log(N) (1 = linear)."""
+    x, y = np.log(np.asarray(ns, float)), np.log(np.asarray(ms, float))
+    ok = np.isfinite(y)
+    if ok.sum() < 2:
+        return math.nan
+    return float(np.polyfit(x[ok], y[ok], 1)[0])
+
+
+# --------------------------------------------------------------------------------------------
+# statistics
+
+
+def _col(raw: Raw, section: str, key: Tuple, runner: str, field: str) -> np.ndarray:
+    return np.array([float(r.get(field, math.nan)) for r in raw.get((section, key, runner), [])])
+
+
+def _mean_pct(raw: Raw, section: str, key: Tuple, runner: str, field: str = 'miscl') -> float:
+    v = _col(raw, section, key, runner, field)
+    v = v[np.isfinite(v)]
+    return 100.0 * float(v.mean()) if v.size else math.nan
+
+
+def _fails(raw: Raw, section: str, key: Tuple, runner: str) -> int:
+    return int(np.nansum(_col(raw, section, key, runner, 'failed')))
+
+
+def _cpu_ms(raw: Raw, section: str, key: Tuple, runner: str) -> float:
+    v = _col(raw, section, key, runner, 'cpu')
+    return 1000.0 * float(np.median(v)) if v.size else math.nan
+
+
+def ratio_ci(a: np.ndarray, b: np.ndarray, n_boot: int = 2000, seed: int = 0
+             ) -> Tuple[float, float, float]:
+    """Ratio of the means ``mean(a) / mean(b)`` of paired samples, with a 95 % bootstrap CI."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if a.size == 0 or b.size != a.size or b.mean() <= 0:
+        return math.nan, math.nan, math.nan
+    idx = np.random.default_rng(seed).integers(0, a.size, size=(n_boot, a.size))
+    mb = b[idx].mean(axis=1)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        boot = a[idx].mean(axis=1) / mb
+    boot = boot[np.isfinite(boot)]
+    lo, hi = (np.percentile(boot, [2.5, 97.5]) if boot.size else (math.nan, math.nan))
+    return float(a.mean() / b.mean()), float(lo), float(hi)
+
+
+def _f(x: float, digits: int = 2) -> str:
+    return '—' if not math.isfinite(x) else f'{x:.{digits}f}'
+
+
+def _cell(raw: Raw, section: str, key: Tuple, runner: str, field: str = 'miscl',
+          digits: int = 2) -> str:
+    txt = _f(_mean_pct(raw, section, key, runner, field), digits)
+    fails = _fails(raw, section, key, runner)
+    return txt + (f' [{fails} fail]' if fails else '')
+
+
+def _mean_median(raw: Raw, section: str, key: Tuple, runner: str, field: str,
+                 digits: int = 2) -> str:
+    v = _col(raw, section, key, runner, field)
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return '—'
+    return f'{100 * v.mean():.{digits}f} ({100 * np.median(v):.{digits}f})'
+
+
+def _broken(raw: Raw, section: str, key: Tuple) -> str:
+    v = _col(raw, section, key, 'robust', 'miscl')
+    return f'{int(np.sum(v > BROKEN))}/{v.size}'
+
+
+def _ratio_txt(r: Tuple[float, float, float]) -> str:
+    val, lo, hi = r
+    return '—' if not math.isfinite(val) else f'{val:.2f} [{_f(lo)}, {_f(hi)}]'
+
+
+def _cmd(args: argparse.Namespace, section: str) -> str:
+    argv = ['--sections', section]
+    if args.quick:
+        argv.append('--quick')
+    argv += ['--trials', str(args.trials), '--seed', str(args.seed)]
+    if args.methods is not None and section in ('floor', 'outliers'):
+        argv += ['--methods', args.methods]
+    return common.command_line('accuracy', argv)
+
+
+# --------------------------------------------------------------------------------------------
+# sections: Markdown and plots
+
+
+def section_floor(raw: Raw, grid: Grid, methods: Sequence[str], args: argparse.Namespace,
+                  summary: List[List[str]], out_dir) -> str:
+    """Section 1: every method and both floors on the paper protocol, two views."""
+    keys = [(n, s) for n in grid.floor_n for s in grid.floor_noise]
+    heads = ['runner'] + [f'n={n}, {s:g} px' for n, s in keys]
+    names = [*methods, FLOOR, FLOOR_W]
+    rows = [[name] + [_cell(raw, 'floor', k, name) for k in keys] for name in names]
+    ratios = {}
+    for ref in (FLOOR, FLOOR_W):
+        ratios[ref] = [ratio_ci(_col(raw, 'floor', k, 'robust', 'miscl'),
+                                _col(raw, 'floor', k, ref, 'miscl')) for k in keys]
+        rows.append([f'**robust / {ref}**'] + [_ratio_txt(r) for r in ratios[ref]])
+    rows.append(['robust: lines labelled -1 %'] + [
+        _cell(raw, 'floor', k, 'robust', 'unassigned') for k in keys])
+    for ref in (FLOOR, FLOOR_W):
+        rows.append([f'robust − {ref} (points)'] + [
+            _f(_mean_pct(raw, 'floor', k, 'robust') - _mean_pct(raw, 'floor', k, ref))
+            for k in keys])
+    w_rows = [[name] + [_cell(raw, 'floor', k, name, 'rel') for k in keys] for name in methods]
+    t_rows = [[name] + [_f(_cpu_ms(raw, 'floor', k, name), 1) for k in keys] for name in names]
+    worst = max(range(len(keys)), key=lambda i: (np.nan_to_num(ratios[FLOOR][i][0], nan=-1)))
+    wr = ratios[FLOOR][worst]
+    over = [f'n={n}, {s:g} px: {ratios[FLOOR][i][0]:.2f}' for i, (n, s) in enumerate(keys)
+            if math.isfinite(ratios[FLOOR][i][0]) and ratios[FLOOR][i][0] > GOAL_FLOOR_RATIO]
+    summary.append(['1. robust / unweighted floor <= 1.00 (misclassification, 2 views)',
+                    f'worst {_ratio_txt(wr)} at n={keys[worst][0]}, {keys[worst][1]:g} px; '
+                    f'{len(over)}/{len(keys)} points above 1.00',
+                    'yes' if not over else 'NO'])
+    plot_floor(raw, grid, methods, keys, ratios, out_dir / 'accuracy_floor.png')
+    return '\n'.join([
+        '## 1. Robust vs the floor (paper protocol, two views)', '',
+        f'Command: `{_cmd(args, "floor")}`', '',
+        'Scenes: `make_scene(n, 20 if n == 2 else 30, n_frames=2, noise_px=s)` (1000 x 1000 '
+        'px, f = 1000 px, rotation 2-6 deg/frame about the camera centre, known intrinsics). '
+        f'{args.trials} scenes per point, every runner on the same scenes. Floors: every line '
+        'assigned with the TRUE motions (`assign_with_motions`), with the algebraic residual '
+        'of the paper (unweighted) and the noise-weighted (Mahalanobis) one. Ratios are ratios of '
+        'the mean misclassification over the trials, with a 95 % paired bootstrap interval in '
+        'brackets (goal: robust / unweighted floor <= 1.00).', '',
+        'Misclassified lines %, mean over trials (`-1` counts as wrong):', '',
+        common.markdown_table(heads, rows),
+        'Relative angular-velocity error %, mean over trials of the mean over bodies of '
+        '`|w_est - w_true| / |w_true|` (bodies matched by the best relabelling):', '',
+        common.markdown_table(heads, w_rows),
+        'Median CPU ms per call:', '', common.markdown_table(heads, t_rows),
+        '![accuracy_floor](accuracy_floor.png)', ''])
+
+
+def plot_floor(raw: Raw, grid: Grid, methods: Sequence[str], keys: Sequence[Tuple],
+               ratios: Dict[str, List[Tuple[float, float, float]]], path) -> None:
+    """PNG: misclassification vs noise per n (log scale), and the robust / floor ratios."""
+    fig, axes = common.new_figure(len(grid.floor_n) + 1, width_per_panel=4.0)
+    xs = list(grid.floor_noise)
+    names = [*methods, FLOOR, FLOOR_W]
+    styles = {m: {'color': COLORS.get(m, 'C5')} for m in methods}
+    for ax, n in zip(axes, grid.floor_n):
+        series = {name: [_mean_pct(raw, 'floor', (n, s), name) for s in xs] for name in names}
+        series = {k: [v if v > 0 else math.nan for v in vals] for k, vals in series.items()}
+        common.plot_series(ax, xs, series, 'endpoint noise (px)', 'misclassified lines (%)',
+                           f'n = {n}, {LINES_PER_BODY[n]} lines/body, K = 2', styles=styles)
+        ax.set_yscale('log')
+    ax = axes[-1]
+    for i, n in enumerate(grid.floor_n):
+        for ref, ls in ((FLOOR, '-'), (FLOOR_W, ':')):
+            vals = [ratios[ref][keys.index((n, s))][0] for s in xs]
+            ax.plot(xs, vals, linestyle=ls, marker='o', markersize=3, color=f'C{i}',
+                    label=f'n={n}, robust / {ref.split(" ")[1].strip("()")} floor')
+    ax.axhline(GOAL_FLOOR_RATIO, color='k', linewidth=0.8)
+    ax.set_xlabel('endpoint noise (px)')
+    ax.set_ylabel('ratio of mean misclassification')
+    ax.set_title('robust / floor (goal <= 1 vs unweighted)', fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=6)
+    common.save_figure(fig, path, legend_ax=axes[0])
+
+
+def section_outliers(raw: Raw, grid: Grid, methods: Sequence[str], args: argparse.Namespace,
+                     summary: List[List[str]], out_dir) -> str:
+    """Section 2: 15 % outlier tracks."""
+    keys = [(n, k, 'mixed') for n in grid.outlier_n for k in grid.outlier_k]
+    heads = ['n, K', 'floor (unw.) %', 'floor (w.) %', 'robust % (median)',
+             'robust − floor (w.)', 'robust − floor (unw.)', 'broken trials',
+             'outliers → -1 %', 'jitter → -1 %', 'stitched → -1 %', 'inliers → -1 %',
+             'robust w err % (median)', f'{ORACLE} w err %']
+    rows = []
+    worst_gap, worst_w = (-math.inf, None), (-math.inf, None)
+    for key in keys:
+        fu, fw = (_mean_pct(raw, 'outliers', key, r) for r in (FLOOR, FLOOR_W))
+        rb = _mean_pct(raw, 'outliers', key, 'robust')
+        werr = _mean_pct(raw, 'outliers', key, 'robust', 'rel')
+        gap = rb - min(fu, fw)
+        worst_gap = max(worst_gap, (gap, key), key=lambda t: np.nan_to_num(t[0], nan=-1e9))
+        worst_w = max(worst_w, (werr, key), key=lambda t: np.nan_to_num(t[0], nan=-1e9))
+        rows.append([f'n={key[0]}, K={key[1]}', _f(fu), _f(fw),
+                     _mean_median(raw, 'outliers', key, 'robust', 'miscl'),
+                     _f(rb - fw), _f(rb - fu), _broken(raw, 'outliers', key),
+                     _cell(raw, 'outliers', key, 'robust', 'out_rej', 1),
+                     _cell(raw, 'outliers', key, 'robust', 'rej_jitter', 1),
+                     _cell(raw, 'outliers', key, 'robust', 'rej_stitched', 1),
+                     _cell(raw, 'outliers', key, 'robust', 'in_rej', 1),
+                     _mean_median(raw, 'outliers', key, 'robust', 'rel', 1),
+                     _cell(raw, 'outliers', key, ORACLE, 'rel', 1)])
+    m_heads = ['runner'] + [f'n={n}, K={k}' for n, k, _ in keys]
+    d_heads = ['n, K, outliers', 'floor (w.) %', 'robust % (median)', 'robust − floor (w.)',
+               'broken trials', 'outliers → -1 %', 'inliers → -1 %', 'robust w err % (median)',
+               f'{ORACLE} w err %', 'robust median CPU ms']
+    d_rows = []
+    for n, k, _ in keys:
+        for mix in MIXES:
+            key = (n, k, mix)
+            fw, rb = (_mean_pct(raw, 'outliers', key, r) for r in (FLOOR_W, 'robust'))
+            d_rows.append([f'n={n}, K={k}, {mix}', _f(fw),
+                           _mean_median(raw, 'outliers', key, 'robust', 'miscl'),
+                           _f(rb - fw), _broken(raw, 'outliers', key),
+                           _cell(raw, 'outliers', key, 'robust', 'out_rej', 1),
+                           _cell(raw, 'outliers', key, 'robust', 'in_rej', 1),
+                           _mean_median(raw, 'outliers', key, 'robust', 'rel', 1),
+                           _cell(raw, 'outliers', key, ORACLE, 'rel', 1),
+                           _f(_cpu_ms(raw, 'outliers', key, 'robust'), 1)])
+    m_rows = [[name] + [_cell(raw, 'outliers', k, name) for k in keys]
+              for name in [*methods, FLOOR, FLOOR_W]]
+    w_rows = [[name] + [_cell(raw, 'outliers', k, name, 'rel', 1) for k in keys]
+              for name in [*methods, ORACLE]]
+    summary.append(['2. outliers: robust inlier misclassification <= best floor + 5 points',
+                    f'worst {_f(worst_gap[0])} points above at n={worst_gap[1][0]}, '
+                    f'K={worst_gap[1][1]}' if worst_gap[1] else '—',
+                    'yes' if worst_gap[0] <= GOAL_OUTLIER_POINTS else 'NO'])
+    summary.append(['2. outliers: robust w error <= 15 %',
+                    f'worst {_f(worst_w[0], 1)} % at n={worst_w[1][0]}, K={worst_w[1][1]}'
+                    if worst_w[1] else '—',
+                    'yes' if worst_w[0] <= GOAL_OMEGA_PCT else 'NO'])
+    plot_outliers(raw, keys, methods, out_dir / 'accuracy_outliers.png')
+    return '\n'.join([
+        '## 2. Outliers (15 % of the tracks follow no rigid motion, 1 px)', '',
+        f'Command: `{_cmd(args, "outliers")}`', '',
+        f'Scenes: the paper protocol at 1 px with K views; then {OUTLIER_FRACTION:.0%} of the '
+        'tracks (chosen at random) are replaced: half of them (rounded up) by *jitter* outliers '
+        f'(every endpoint of every frame moved {JITTER_PX[0]:g}-{JITTER_PX[1]:g} px in a random '
+        'direction, independently), the others by *stitched* outliers (frame k taken from '
+        'frame k of another line of the scene, a different line per frame). Misclassification '
+        'is over the TRUE INLIERS only (best relabelling, `-1` wrong); the floors assign every '
+        'line with the true motions (outliers included, scored on the inliers). '
+        f'`{ORACLE}`: weighted least-squares fit of the solver model to the inliers with '
+        f'their true labels (the motion error to expect with a perfect segmentation). Goals: '
+        f'robust within {GOAL_OUTLIER_POINTS:g} points of the floor, w error <= '
+        f'{GOAL_OMEGA_PCT:g} %. {args.trials} scenes per point. Cells: mean over trials, the '
+        f'median in brackets; *broken trials*: trials whose robust inlier misclassification '
+        f'exceeds {100 * BROKEN:g} % (the bodies are mixed up, not a few lines lost).', '',
+        common.markdown_table(heads, rows),
+        'Inlier misclassification % of every method (mean; the non-robust methods never '
+        'output -1):', '', common.markdown_table(m_heads, m_rows),
+        'Relative angular-velocity error %, mean:', '', common.markdown_table(m_heads, w_rows),
+        'Diagnosis, one outlier kind at a time (the same scenes and the same tracks replaced '
+        'as in the mixed rows, all by jitter or all by stitched outliers):', '',
+        common.markdown_table(d_heads, d_rows),
+        '![accuracy_outliers](accuracy_outliers.png)', ''])
+
+
+def plot_outliers(raw: Raw, keys: Sequence[Tuple], methods: Sequence[str], path) -> None:
+    """PNG: grouped bars of inlier misclassification and w error per (n, K)."""
+    fig, axes = common.new_figure(2, width_per_panel=5.2)
+    x = np.arange(len(keys))
+    labels = [f'n={n}, K={k}' for n, k, _ in keys]
+    names = [*methods, FLOOR, FLOOR_W]
+    width = 0.8 / len(names)
+    for i, name in enumerate(names):
+        vals = [_mean_pct(raw, 'outliers', k, name) for k in keys]
+        color = COLORS.get(name, '0.2' if name == FLOOR else '0.6')
+        axes[0].bar(x + (i - len(names) / 2 + 0.5) * width, vals, width, label=name,
+                    color=color)
+    axes[0].set_yscale('log')
+    axes[0].set_ylabel('inlier misclassification (%), mean')
+    names_w = [*methods, ORACLE]
+    width_w = 0.8 / len(names_w)
+    for i, name in enumerate(names_w):
+        vals = [_mean_pct(raw, 'outliers', k, name, 'rel') for k in keys]
+        axes[1].bar(x + (i - len(names_w) / 2 + 0.5) * width_w, vals, width_w, label=name,
+                    color=COLORS.get(name, 'C5'))
+    axes[1].axhline(GOAL_OMEGA_PCT, color='k', linewidth=0.8)
+    axes[1].set_yscale('log')
+    axes[1].set_ylabel('relative w error (%), mean')
+    axes[1].legend(fontsize=7, ncol=2, loc='upper center')
+    for ax in axes:
+        ax.set_xticks(x)
+        ax.set_xticklabels(labels, fontsize=8)
+        ax.grid(True, alpha=0.3, axis='y')
+        lo, hi = ax.get_ylim()
+        ax.set_ylim(lo, hi * 40.0)  # room for the legend above the bars (log scale)
+    fig.suptitle(f'{OUTLIER_FRACTION:.0%} outlier tracks, 1 px', fontsize=11)
+    axes[0].legend(fontsize=7, ncol=2, loc='upper center')
+    common.save_figure(fig, path)
+
+
+def section_frames(raw: Raw, grid: Grid, args: argparse.Namespace,
+                   summary: List[List[str]], out_dir) -> str:
+    """Section 3: more views."""
+    heads = ['K']
+    for s in grid.frames_noise:
+        heads += [f'robust % ({s:g} px)', f'robust -1 % ({s:g} px)', f'floor (w.) % ({s:g} px)',
+                  f'floor (unw.) % ({s:g} px)', f'robust w err % ({s:g} px)',
+                  f'{ORACLE} w err % ({s:g} px)']
+    rows = []
+    for k in grid.frames_k:
+        row = [str(k)]
+        for s in grid.frames_noise:
+            key = (k, s)
+            row += [_cell(raw, 'frames', key, 'robust'),
+                    _cell(raw, 'frames', key, 'robust', 'unassigned'),
+                    _cell(raw, 'frames', key, FLOOR_W),
+                    _cell(raw, 'frames', key, FLOOR),
+                    _cell(raw, 'frames', key, 'robust', 'rel'),
+                    _cell(raw, 'frames', key, ORACLE, 'rel')]
+        rows.append(row)
+    lines = []
+    if 2 in grid.frames_k and 5 in grid.frames_k:
+        verdicts = []
+        for s in grid.frames_noise:
+            r = ratio_ci(_col(raw, 'frames', (5, s), 'robust', 'miscl'),
+                         _col(raw, 'frames', (2, s), 'robust', 'miscl'))
+            rf = ratio_ci(_col(raw, 'frames', (5, s), FLOOR_W, 'miscl'),
+                          _col(raw, 'frames', (2, s), FLOOR_W, 'miscl'))
+            lines.append(f'- {s:g} px: robust K=5 / K=2 = {_ratio_txt(r)}; weighted floor '
+                         f'K=5 / K=2 = {_ratio_txt(rf)}')
+            verdicts.append((s, r[0]))
+        ok = all(math.isfinite(v) and v <= GOAL_FRAMES_RATIO for _, v in verdicts)
+        summary.append(['3. frames: robust K=5 misclassification <= 0.5 x K=2',
+                        '; '.join(f'{s:g} px: {_f(v)}' for s, v in verdicts),
+                        'yes' if ok else 'NO'])
+    plot_frames(raw, grid, out_dir / 'accuracy_frames.png')
+    n = grid.frames_n
+    return '\n'.join([
+        '## 3. Multi-frame (n = 3)', '',
+        f'Command: `{_cmd(args, "frames")}`', '',
+        f'Scenes: `make_scene({n}, {LINES_PER_BODY[n]}, n_frames=K, noise_px=s)`, constant '
+        f'motion over the K views (each line gives 2 (K - 1) equations). {args.trials} scenes '
+        'per point; misclassification % (`-1` wrong), lines the robust method labels `-1` '
+        '(all of them true inliers here) and relative w error %, means over trials. '
+        f'`{ORACLE}`: the motion error of a weighted least-squares fit with the true labels.',
+        '', common.markdown_table(heads, rows),
+        'Ratios of mean misclassification, K = 5 vs K = 2 (95 % bootstrap interval; goal: '
+        f'"a wide margin", taken as <= {GOAL_FRAMES_RATIO:g}):', '', *lines, '',
+        '![accuracy_frames](accuracy_frames.png)', ''])
+
+
+def plot_frames(raw: Raw, grid: Grid, path) -> None:
+    """PNG: misclassification and w error vs K."""
+    fig, axes = common.new_figure(2)
+    ks = list(grid.frames_k)
+    s_m, s_w, styles = {}, {}, {}
+    for i, s in enumerate(grid.frames_noise):
+        for name, color, ls in (('robust', 'C3', '-'), (FLOOR_W, '0.55', '--'),
+                                (FLOOR, '0.2', ':')):
+            lab = f'{name}, {s:g} px'
+            s_m[lab] = [_mean_pct(raw, 'frames', (k, s), name) for k in ks]
+            styles[lab] = {'color': color, 'linestyle': ls, 'marker': 'os'[i % 2],
+                           'alpha': 1.0 if i == 0 else 0.6}
+        for name, color in (('robust', 'C3'), (ORACLE, 'C4')):
+            lab = f'{name}, {s:g} px'
+            s_w[lab] = [_mean_pct(raw, 'frames', (k, s), name, 'rel') for k in ks]
+            styles[lab] = {'color': color, 'linestyle': '-' if i == 0 else '--',
+                           'marker': 'os'[i % 2]}
+    common.plot_series(axes[0], ks, s_m, 'views K', 'misclassified lines (%)',
+                       f'n = {grid.frames_n}', styles=styles)
+    common.plot_series(axes[1], ks, s_w, 'views K', 'relative w error (%)',
+                       f'n = {grid.frames_n}', styles=styles)
+    axes[1].legend(fontsize=7)
+    common.save_figure(fig, path, legend_ax=axes[0])
+
+
+def section_nbodies(raw: Raw, grid: Grid, args: argparse.Namespace,
+                    summary: List[List[str]]) -> str:
+    """Section 4: automatic number of bodies."""
+    from mlofc_ros.solver.model_selection import MAX_BODIES
+    est_range = list(range(1, MAX_BODIES + 1))
+    heads = ['K', 'true n', 'correct %'] + [f'→ {m}' for m in est_range] + [
+        'fail', 'miscl. % (auto n)', 'median CPU ms']
+    rows = []
+    worst = (math.inf, None)
+    for k in grid.nbodies_k:
+        for n in grid.nbodies_n:
+            key = (k, n)
+            est = _col(raw, 'nbodies', key, AUTO, 'n_est')
+            fails = _fails(raw, 'nbodies', key, AUTO)
+            correct = 100.0 * float(np.mean(est == n)) if est.size else math.nan
+            worst = min(worst, (correct, key), key=lambda t: np.nan_to_num(t[0], nan=1e9))
+            rows.append([str(k), str(n), _f(correct, 1)]
+                        + [str(int(np.sum(est == m))) for m in est_range]
+                        + [str(fails), _f(_mean_pct(raw, 'nbodies', key, AUTO)),
+                           _f(_cpu_ms(raw, 'nbodies', key, AUTO), 1)])
+    if worst[1] is not None:
+        summary.append(['4. n_bodies=0 picks the true n in >= 95 % of trials',
+                        f'worst {_f(worst[0], 1)} % at K={worst[1][0]}, n={worst[1][1]}',
+                        'yes' if worst[0] >= GOAL_NBODIES_PCT else 'NO'])
+    return '\n'.join([
+        '## 4. Number of bodies (`n_bodies=0`, 1 px)', '',
+        f'Command: `{_cmd(args, "nbodies")}`', '',
+        'Scenes: the paper protocol (20 lines/body for n <= 2, 30 for n = 3, 4) at 1 px, '
+        f'K views; `segment_lines(tracks, 0, ..., method="robust")` chooses n in 1..'
+        f'{MAX_BODIES}. {args.trials} scenes per row. `→ m`: trials in which n = m was chosen '
+        '(confusion counts). Misclassification with the chosen n: best matching of predicted '
+        'to true bodies, lines of an extra body or `-1` count as wrong. Goal: correct >= '
+        f'{GOAL_NBODIES_PCT:g} %.', '', common.markdown_table(heads, rows)])
+
+
+def section_speed(speed: Dict[int, Dict[str, Dict[str, np.ndarray]]], grid: Grid,
+                  args: argparse.Namespace, summary: List[List[str]], out_dir) -> str:
+    """Section 5: solver time vs number of lines (wall and CPU, ratios to the reference)."""
+    ns = sorted(speed)
+    heads = ['N lines', 'robust wall ms (p90)', 'robust CPU ms (p90)', 'robust CPU ms/line',
+             'algebraic wall ms (p90)', 'algebraic CPU ms (p90)', 'algebraic CPU ms/line',
+             'reference wall / CPU ms', 'robust / reference (CPU)',
+             'algebraic / reference (CPU)']
+    rows = []
+    runners = ('robust', 'algebraic', 'reference')
+    med = {(m, c): [] for m in runners for c in ('wall', 'cpu')}
+    for n_lines in ns:
+        st = {(m, c): common.summarize(1000.0 * speed[n_lines][m][c])
+              for m in runners for c in ('wall', 'cpu')}
+        for mc in med:
+            med[mc].append(st[mc]['median'])
+        ref = st[('reference', 'cpu')]['median']
+        row = [str(n_lines)]
+        for m in ('robust', 'algebraic'):
+            row += [f"{st[(m, 'wall')]['median']:.1f} ({st[(m, 'wall')]['p90']:.1f})",
+                    f"{st[(m, 'cpu')]['median']:.1f} ({st[(m, 'cpu')]['p90']:.1f})",
+                    f"{st[(m, 'cpu')]['median'] / n_lines:.3f}"]
+        row += [f"{st[('reference', 'wall')]['median']:.2f} / {ref:.2f}",
+                f"{st[('robust', 'cpu')]['median'] / ref:.1f}",
+                f"{st[('algebraic', 'cpu')]['median'] / ref:.1f}"]
+        rows.append(row)
+    big = [i for i, n in enumerate(ns) if n >= 200]
+    slopes = {}
+    for m in ('robust', 'algebraic'):
+        for c in ('cpu', 'wall'):
+            vals = med[(m, c)]
+            slopes[(m, c)] = (_slope(ns, vals),
+                              _slope([ns[i] for i in big], [vals[i] for i in big]))
+    lines = [f'- log-log slope of the median {c.upper() if c == "cpu" else c} time vs N ({m}): '
+             f'{_f(a)} over all N, {_f(b)} for N >= 200 (1 = linear)'
+             for (m, c), (a, b) in slopes.items()]
+    at200 = {c: med[('robust', c)][ns.index(200)] if 200 in ns else math.nan
+             for c in ('cpu', 'wall')}
+    ref_cpu = np.concatenate([speed[n]['reference']['cpu'] for n in ns]) * 1000.0
+    ref_wall = np.concatenate([speed[n]['reference']['wall'] for n in ns]) * 1000.0
+    summary.append(['5. robust <= 3 ms at N = 200 (n = 3, K = 5), linear in N',
+                    f'{_f(at200["cpu"], 1)} ms CPU ({_f(at200["cpu"] / GOAL_MS_200, 1)} x the '
+                    f'goal), {_f(at200["wall"], 1)} ms wall, median at N = 200; CPU log-log '
+                    f'slope {_f(slopes[("robust", "cpu")][0])} '
+                    f'(N >= 200: {_f(slopes[("robust", "cpu")][1])})',
+                    'yes' if at200['cpu'] <= GOAL_MS_200 else 'NO'])
+    plot_speed(ns, med, out_dir / 'accuracy_speed.png')
+    env = ', '.join(f'{v}={os.environ.get(v, "unset")}'
+                    for v in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'))
+    load = os.getloadavg() if hasattr(os, 'getloadavg') else (math.nan,) * 3
+    return '\n'.join([
+        '## 5. Solver speed', '',
+        f'Command: `{_cmd(args, "speed")}`', '',
+        f'Scenes: n = 3 bodies, K = 5 views, 1 px, N lines split evenly; {grid.speed_scenes} '
+        f'scenes per N, one warm-up call each, then {grid.speed_reps} rounds of (reference, '
+        '`segment_lines(..., method="algebraic")`, `segment_lines(..., method="robust")`) '
+        'timed in turn (wall: `perf_counter`, CPU: `process_time`), so all three see the same '
+        f'machine load. Ran first in the process, single-threaded ({env}). Load average at '
+        f'the end of the run: {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} on '
+        f'{os.cpu_count()} cores, so the wall times are inflated by the other processes; the '
+        'CPU times (this process only) are the uncontended estimate, and the ratios to the '
+        'reference workload (CPU over CPU, same run) compare across machines. Reference: '
+        '`mlofc_ros.bench.accuracy.reference_workload` (QR, normal equations and SVD of a '
+        '4000 x 12 matrix, row norms, exp and sort of 50 000 numbers); median of its '
+        f'{ref_cpu.size} timings {np.median(ref_cpu):.2f} ms CPU (p90 '
+        f'{np.percentile(ref_cpu, 90):.2f}), {np.median(ref_wall):.2f} ms wall (p90 '
+        f'{np.percentile(ref_wall, 90):.2f}).', '',
+        'Medians over calls, p90 in brackets:', '',
+        common.markdown_table(heads, rows), *lines, '',
+        f'Goal: <= {GOAL_MS_200:g} ms at N = 200 and linear in N.', '',
+        '![accuracy_speed](accuracy_speed.png)', ''])
+
+
+def plot_speed(ns: Sequence[int], med: Dict[Tuple[str, str], List[float]], path) -> None:
+    """PNG: log-log median CPU and wall time vs N, a linear-scaling guide and the 3 ms goal."""
+    fig, axes = common.new_figure(1, width_per_panel=5.5)
+    ax = axes[0]
+    for name, color in (('robust', 'C3'), ('algebraic', 'C0'), ('reference', '0.5')):
+        ax.plot(ns, med[(name, 'cpu')], marker='o', color=color, label=f'{name}, CPU')
+        ax.plot(ns, med[(name, 'wall')], marker='.', color=color, linestyle=':', alpha=0.6,
+                label=f'{name}, wall')
+    first = med[('robust', 'cpu')][0] if ns else math.nan
+    if math.isfinite(first):
+        guide = first * np.asarray(ns, float) / ns[0]
+        ax.plot(ns, guide, linestyle='--', color='C3', alpha=0.4, label='linear in N')
+    ax.plot([200], [GOAL_MS_200], marker='*', markersize=12, color='k', linestyle='none',
+            label=f'goal {GOAL_MS_200:g} ms at N = 200')
+    ax.set_xscale('log')
+    ax.set_yscale('log')
+    ax.set_xlabel('lines N (n = 3, K = 5)')
+    ax.set_ylabel('ms per call (median)')
+    ax.grid(True, which='both', alpha=0.3)
+    common.save_figure(fig, path, legend_ax=ax)
+
+
+# --------------------------------------------------------------------------------------------
+# entry point
+
+
+def solver_revision() -> str:
+    """Short hash of the last commit of ``mlofc_ros/solver``, ``+dirty`` when edited since.
+
+    ``'unknown (not a git checkout)'`` when git or the repository is not there.
+    """
+    import subprocess
+    root = pathlib.Path(__file__).resolve().parents[2]
+    try:
+        rev = subprocess.run(['git', 'log', '-1', '--format=%h', '--', 'mlofc_ros/solver'],
+                             cwd=root, capture_output=True, text=True, timeout=10,
+                             check=True).stdout.strip()
+        dirty = subprocess.run(['git', 'status', '--porcelain', '--', 'mlofc_ros/solver'],
+                               cwd=root, capture_output=True, text=True, timeout=10,
+                               check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return 'unknown (not a git checkout)'
+    return (rev or 'unknown') + ('+dirty' if dirty else '')
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    """Command-line options of ``python -m mlofc_ros.bench accuracy``."""
+    p = argparse.ArgumentParser(prog='python -m mlofc_ros.bench accuracy', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('--trials', type=int, default=None,
+                   help='scenes per point (default 50; 2 with --quick)')
+    p.add_argument('--quick', action='store_true', help='smoke run: tiny grids, 2 trials')
+    p.add_argument('--out', default=None, help='output folder (default docs/results)')
+    p.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1),
+                   help='worker processes of sections 1-4 (default min(2, cores))')
+    p.add_argument('--seed', type=int, default=4711, help='base seed (default 4711)')
+    p.add_argument('--methods', default=None,
+                   help='comma-separated subset of mlofc_ros.solver.METHODS for sections 1-2 '
+                        '(default all)')
+    p.add_argument('--label', default='',
+                   help='free text for the report header (e.g. the solver revision when run '
+                        'outside a git checkout)')
+    p.add_argument('--sections', default=','.join(SECTIONS),
+                   help=f'comma-separated subset of {",".join(SECTIONS)} (speed always runs '
+                        'first)')
+    args = p.parse_args(list(argv))
+    if args.trials is None:
+        args.trials = 2 if args.quick else 50
+    if args.trials < 1 or args.jobs < 1:
+        p.error('--trials and --jobs must be >= 1')
+    args.sections = [s.strip() for s in args.sections.split(',') if s.strip()]
+    bad = set(args.sections) - set(SECTIONS)
+    if bad or not args.sections:
+        p.error(f'--sections: choose from {",".join(SECTIONS)}')
+    return args
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the benchmark; returns the process exit code."""
+    argv = list(argv or [])
+    args = parse_args(argv)
+    from mlofc_ros.solver import METHODS
+    methods = list(METHODS) if args.methods is None else [
+        m.strip() for m in args.methods.split(',') if m.strip()]
+    unknown = set(methods) - set(METHODS)
+    if unknown or 'robust' not in methods:
+        common.eprint(f'--methods: choose from {list(METHODS)}, including robust')
+        return 2
+    grid = QUICK_GRID if args.quick else Grid()
+    out_dir = common.results_dir(args.out)
+    t0 = time.perf_counter()
+    speed = None
+    if 'speed' in args.sections:  # first, alone in the process, before any worker exists
+        common.eprint('accuracy: speed section')
+        speed = run_speed(grid, args.seed)
+    tasks = make_tasks(args.sections, grid, args.trials, args.seed, methods)
+    common.eprint(f'accuracy: {len(tasks)} scenes, {args.jobs} process(es)')
+    raw, errors, seconds = run_tasks(tasks, args.jobs)
+    cpu = sum(float(r.get('cpu', 0.0)) for recs in raw.values() for r in recs)
+    summary: List[List[str]] = []
+    body = []
+    if 'floor' in args.sections:
+        body.append(section_floor(raw, grid, methods, args, summary, out_dir))
+    if 'outliers' in args.sections:
+        body.append(section_outliers(raw, grid, methods, args, summary, out_dir))
+    if 'frames' in args.sections:
+        body.append(section_frames(raw, grid, args, summary, out_dir))
+    if 'nbodies' in args.sections:
+        body.append(section_nbodies(raw, grid, args, summary))
+    if speed is not None:
+        body.append(section_speed(speed, grid, args, summary, out_dir))
+    total = time.perf_counter() - t0
+    extra = {'Trials per point': str(args.trials), 'Methods': ', '.join(methods),
+             'Base seed': str(args.seed), 'Solver revision': solver_revision(),
+             'Run time': f'{total:.0f} s wall; sections 1-4: {seconds:.0f} s wall with '
+                         f'{args.jobs} worker process(es), {cpu:.0f} s CPU in the solver calls'}
+    if args.label:
+        extra['Note'] = args.label
+    command = common.command_line('accuracy', argv)
+    parts = [common.run_header('Solver accuracy and speed', command, extra),
+             '## Goals', '',
+             common.markdown_table(['goal', 'measured', 'met'], summary, align='llc'),
+             *body]
+    if errors:
+        parts += ['## Failures', '']
+        for where, msgs in sorted(errors.items()):
+            parts.append(f'- {where}: {len(msgs)} trial(s); e.g. `{sorted(set(msgs))[0][:200]}`')
+        parts.append('')
+    report = '\n'.join(parts)
+    (out_dir / 'accuracy.md').write_text(report)
+    print(report)
+    common.eprint(f'accuracy: wrote {out_dir / "accuracy.md"} in {total:.0f} s')
+    return 0
