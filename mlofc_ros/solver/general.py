@@ -79,11 +79,14 @@ def _motion_terms(w: np.ndarray, t: np.ndarray, n_frames: int) -> Tuple[np.ndarr
 
 
 def line_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
-                   n0: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+                   n0: Optional[np.ndarray] = None, fixed: Optional[np.ndarray] = None
+                   ) -> Tuple[np.ndarray, np.ndarray]:
     """Whitened residual ``(L,)`` (sum of squares) and moment direction ``n0 (L, 3)``.
 
     ``idx``: tracks to evaluate; ``n0``: current moment estimates, whose orthogonal plane
-    holds ``v0`` (defaults to the first observed normal).
+    holds ``v0`` (defaults to the first observed normal). With ``fixed (L, 3)`` the moments are
+    not re-solved: the projected residual VECTORS ``(L, 2K)`` at those moments are returned
+    instead of the minimal costs (for Gauss-Newton by variable projection).
     """
     rows = obs.rows[idx]                                             # (L, K, 2, 3)
     L, K = rows.shape[0], rows.shape[1]
@@ -104,6 +107,8 @@ def line_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.
     q2 = np.where(n2 > 1e-12 * np.maximum(n1, 1.0), q2 / np.maximum(n2, 1e-300), 0.0)
     P = An - q1[..., None] * np.einsum('lr,lrc->lc', q1, An)[:, None, :]
     P = P - q2[..., None] * np.einsum('lr,lrc->lc', q2, P)[:, None, :]
+    if fixed is not None:
+        return np.einsum('lrc,lc->lr', P, fixed), fixed
     G = np.swapaxes(P, 1, 2) @ P                                     # (L, 3, 3)
     val, vec = np.linalg.eigh(G)
     n0_new = vec[..., 0]
@@ -111,63 +116,87 @@ def line_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.
     return np.maximum(val[:, 0], 0.0), n0_new
 
 
+def _tangent(t: np.ndarray) -> np.ndarray:
+    """Two unit vectors ``(2, 3)`` orthogonal to the unit vector ``t``."""
+    return np.swapaxes(orthonormal_pair(t[None])[0], 0, 1)
+
+
 def fit_body(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, t0: np.ndarray,
              iterations: int = 15) -> Tuple[np.ndarray, np.ndarray, float]:
-    """Levenberg-Marquardt on ``(w, T)`` for the tracks ``idx``; returns w, unit T, cost."""
-    w, t = np.array(w0, float), np.array(t0, float)
-    t = t / max(np.linalg.norm(t), 1e-12) if np.linalg.norm(t) > 1e-12 else t
+    """Levenberg-Marquardt on ``(w, T/|T|)`` for the tracks ``idx``; returns w, unit T, cost.
+
+    Variable projection: the per-line unknowns are eliminated, the Jacobian is taken of every
+    line's projected residual vector (central differences, moments held fixed) and the unit
+    translation moves in its tangent plane (five parameters, no gauge freedom).
+    """
+    w = np.array(w0, dtype=float)
+    t = np.array(t0, dtype=float)
+    t = t / np.linalg.norm(t) if np.linalg.norm(t) > 1e-12 else np.array([0.0, 0.0, 1.0])
     res, n0 = line_residuals(obs, idx, w, t)
     res, n0 = line_residuals(obs, idx, w, t, n0)
     cost = float(res.sum())
-    lam = 1e-3
-    h = 1e-6
+    lam, h = 1e-3, 1e-6
     for _ in range(iterations):
-        # residuals, Jacobian and trial steps all with the same v0-plane basis (from n0)
-        res, n0_next = line_residuals(obs, idx, w, t, n0)
-        cost = float(res.sum())
-        r0 = np.sqrt(res)
-        x = np.r_[w, t]
-        J = np.empty((idx.size, 6))
-        for j in range(6):                       # numeric Jacobian: 6 parameters
-            dx = np.zeros(6)
-            dx[j] = h
-            rj, _ = line_residuals(obs, idx, x[:3] + dx[:3], x[3:] + dx[3:], n0)
-            J[:, j] = (np.sqrt(rj) - r0) / h
-        H = J.T @ J
-        g = J.T @ r0
+        basis = _tangent(t)
+
+        def vec(x: np.ndarray) -> np.ndarray:
+            tt = t + x[3:] @ basis
+            return line_residuals(obs, idx, w + x[:3], tt / np.linalg.norm(tt), n0,
+                                  fixed=n0)[0].ravel()
+        r0 = vec(np.zeros(5))
+        J = np.empty((r0.size, 5))
+        for j in range(5):                              # five parameters
+            d = np.zeros(5)
+            d[j] = h
+            J[:, j] = (vec(d) - vec(-d)) / (2.0 * h)
+        H, g = J.T @ J, J.T @ r0
         improved = False
-        for _ in range(6):
-            step = -np.linalg.solve(H + lam * (np.diag(np.diag(H)) + 1e-12 * np.eye(6)), g)
-            xn = x + step
-            tn = xn[3:]
-            tn = tn / np.linalg.norm(tn) if np.linalg.norm(tn) > 1e-9 else tn
-            rn, n0n = line_residuals(obs, idx, xn[:3], tn, n0)
+        for _ in range(8):
+            step = -np.linalg.solve(H + lam * (np.diag(np.diag(H)) + 1e-12 * np.eye(5)), g)
+            tn = t + step[3:] @ basis
+            tn /= np.linalg.norm(tn)
+            rn, n0n = line_residuals(obs, idx, w + step[:3], tn, n0)
+            rn, n0n = line_residuals(obs, idx, w + step[:3], tn, n0n)
             if rn.sum() < cost:
-                w, t, res, cost = xn[:3], tn, rn, float(rn.sum())
-                n0 = n0_next
-                lam = max(lam / 3.0, 1e-9)
+                w, t, n0, cost = w + step[:3], tn, n0n, float(rn.sum())
+                lam = max(lam / 5.0, 1e-12)
                 improved = True
                 break
-            lam *= 4.0
-        if not improved or np.linalg.norm(step) < 1e-10:
+            lam *= 5.0
+        if not improved or np.linalg.norm(step) < 1e-12:
             break
     return w, t, cost
 
 
-#: Starting translation directions tried for a body without a previous estimate.
-T_STARTS = np.vstack([np.eye(3), -np.eye(3)])
+def _hemisphere(n: int = 32) -> np.ndarray:
+    """``(n, 3)`` directions spread over a hemisphere (Fibonacci lattice): the cost depends on
+    T only through its span, so T and -T are the same start."""
+    k = np.arange(n) + 0.5
+    z = k / n
+    phi = np.pi * (1.0 + 5.0 ** 0.5) * k
+    r = np.sqrt(1.0 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+#: Translation directions scanned for a body without a previous estimate.
+T_STARTS = _hemisphere()
 
 
 def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
-                        t0: Optional[np.ndarray] = None, iterations: int = 12
-                        ) -> Tuple[np.ndarray, np.ndarray, float]:
-    """:func:`fit_body` from ``t0`` if given, else from the six axis directions (best kept).
-
-    The cost is not convex in the direction of T; six starts cover the sphere.
-    """
-    starts = T_STARTS if t0 is None else np.atleast_2d(t0)
+                        t0: Optional[np.ndarray] = None, iterations: int = 15,
+                        keep: int = 3) -> Tuple[np.ndarray, np.ndarray, float]:
+    """:func:`fit_body` from ``t0`` if given, else from the ``keep`` best of a scan of
+    :data:`T_STARTS` at ``w0`` (the cost is not convex in the direction of T)."""
+    if t0 is not None:
+        starts = np.atleast_2d(t0)
+    else:
+        scan = []
+        for t in T_STARTS:                               # 32 directions, each vectorised
+            res, n0 = line_residuals(obs, idx, w0, t)
+            scan.append(line_residuals(obs, idx, w0, t, n0)[0].sum())
+        starts = T_STARTS[np.argsort(scan)[:keep]]
     best = None
-    for t in starts:                                     # <= 6 starts, not a loop over lines
+    for t in starts:
         fit = fit_body(obs, idx, w0, t, iterations)
         if best is None or fit[2] < best[2]:
             best = fit
