@@ -20,10 +20,21 @@ Topics (relative names, remap as usual)::
     pub  ~/segments          sensor_msgs/PointCloud2        one per processed image
     pub  ~/body_<i>/twist    geometry_msgs/TwistWithCovarianceStamped, i = 0..num_bodies-1
     pub  ~/debug_image       sensor_msgs/Image bgr8         if publish_debug_image or subscribed
+    pub  /diagnostics        diagnostic_msgs/DiagnosticArray  1 Hz, see below
 
 Every output carries the input image's header (stamp, camera optical frame). A twist is
 published only for a body solved in that frame (finite angular velocity and covariance). Frames
-with an undecodable image or a duplicate stamp are skipped (no output, throttled warning).
+with an undecodable image or a duplicate stamp are skipped (no output, throttled warning); a
+processed frame without lines still gets its (empty) ``~/segments`` cloud. A stamp going back
+(bag loop) restarts tracks and window, a gap of ``max_frame_gap`` intervals the window. A bad
+camera_info (K zero or non-finite, wrong D length, unknown distortion model) is warned about
+once per change and ignored: ``focal_length`` is used, or the focal length estimated.
+
+``/diagnostics`` carries one ``DiagnosticStatus`` named ``mlofc: pipeline`` (``ns/mlofc:
+pipeline`` in a namespace; hardware_id = the image frame_id) at 1 Hz (steady clock): rate of
+processed frames (Hz), tracked lines, window fill, frames received/processed/dropped/skipped, the
+last problem and its age; level WARN while a problem is less than :attr:`MlofcNode.problem_hold`
+seconds old, OK otherwise.
 
 The subscription callback only queues the image (a bounded queue of ``queue_size`` frames that
 drops the stalest frame); a worker thread decodes, runs the pipeline and publishes, so the
@@ -37,14 +48,17 @@ dynamic typing and integers converted).
 Run: ``ros2 run mlofc_ros mlofc_node --ros-args -r image:=/cam/image_raw -p num_bodies:=3``.
 """
 from collections import deque
+import re
 import threading
 import time
 from typing import Any, Deque, Dict, List, Optional, Tuple
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TwistWithCovarianceStamped
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -54,7 +68,7 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from mlofc_ros import params as P
 from mlofc_ros.camera import CameraModel
-from mlofc_ros.image.decode import image_msg_to_gray
+from mlofc_ros.image import image_msg_to_gray
 from mlofc_ros.messages.debug import draw_debug
 from mlofc_ros.pipeline import FrameResult, Pipeline
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
@@ -62,6 +76,15 @@ from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, de
 
 #: Reliable output QoS: keeps up to this many messages per topic for slow subscribers.
 OUTPUT_DEPTH = 10
+#: Seconds between two ``/diagnostics`` messages.
+DIAGNOSTICS_PERIOD = 1.0
+#: Default seconds a problem keeps the diagnostic level at WARN.
+PROBLEM_HOLD = 5.0
+
+
+def problem_kind(text: str) -> str:
+    """Return ``text`` with its numbers blanked: the kind of a problem, for throttling."""
+    return re.sub(r'\d+', '#', text)
 
 
 def parameter_descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
@@ -105,6 +128,11 @@ class MlofcNode(Node):
         self._camera: Optional[CameraModel] = None
         self._camera_size: Optional[Tuple[int, int]] = None
         self._last_warn: Dict[str, float] = {}
+        self._problem: Optional[Tuple[float, str]] = None   # (monotonic s, text) of the last
+        self._camera_problem: Optional[str] = None
+        self._frame_id = ''
+        #: Seconds a problem keeps ``/diagnostics`` at WARN.
+        self.problem_hold = PROBLEM_HOLD
         self.stats = {'received': 0, 'processed': 0, 'dropped': 0, 'skipped': 0, 'errors': 0}
         self.last_result: Optional[FrameResult] = None
 
@@ -121,6 +149,12 @@ class MlofcNode(Node):
         self.create_subscription(CameraInfo, 'camera_info', self._on_camera_info,
                                  qos_profile_sensor_data)
         self.add_post_set_parameters_callback(self._apply_parameters)
+
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
+                                               QoSProfile(depth=OUTPUT_DEPTH))
+        self._diag_last = (time.monotonic(), 0)
+        self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
 
         self._stop = threading.Event()
         self._worker = threading.Thread(target=self._run, name='mlofc_worker', daemon=True)
@@ -182,27 +216,78 @@ class MlofcNode(Node):
     def _on_image(self, msg: Image) -> None:
         with self._lock:
             self.stats['received'] += 1
+            self._frame_id = msg.header.frame_id
             self._queue.append((msg, self._camera, self._camera_size))
             self._trim_queue()
             self._wake.notify()
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
+        """Keep the camera model; warn once per change of problem (it comes with every frame)."""
         try:
-            camera = camera_model_from_info(msg)
-        except ValueError as exc:
-            self._warn('camera_info', f'ignoring camera_info ({exc}); the focal length is '
-                       'estimated from the images')
-            camera = None
+            camera, size, problem = camera_model_from_info(msg), camera_info_size(msg), None
+        except Exception as exc:  # noqa: B902 (a malformed message must not stop the executor)
+            camera, size, problem = None, None, str(exc)
         with self._lock:
-            self._camera = camera
-            self._camera_size = camera_info_size(msg) if camera is not None else None
+            self._camera, self._camera_size = camera, size
+            changed, self._camera_problem = problem != self._camera_problem, problem
+            focal = self._values['focal_length']
+        if problem is None:
+            if changed:
+                self.get_logger().info('camera_info is usable again')
+            return
+        fallback = (f'using focal_length = {focal:g} px' if focal > 0 else
+                    'the focal length is estimated from the images')
+        text = f'ignoring camera_info: {problem}; {fallback}'
+        self._note_problem(text)
+        if changed:
+            self.get_logger().warning(text)
+
+    def _note_problem(self, text: str) -> None:
+        """Remember ``text`` as the last problem (for ``/diagnostics``)."""
+        self._problem = (time.monotonic(), text)
 
     def _warn(self, key: str, text: str) -> None:
         """Log a warning, at most once per ``warn_period`` seconds per kind of problem."""
         now = time.monotonic()
+        self._note_problem(text)
+        key = f'{key}:{problem_kind(text)}'
         if now - self._last_warn.get(key, -1e300) >= self._values['warn_period']:
             self._last_warn[key] = now
             self.get_logger().warning(text)
+
+    def _publish_diagnostics(self) -> None:
+        """Publish the node's ``DiagnosticStatus`` on ``/diagnostics`` (timer, 1 Hz)."""
+        now = time.monotonic()
+        with self._lock:
+            stats, problem, frame_id = dict(self.stats), self._problem, self._frame_id
+            window = self._values['window']
+        last_t, last_n = self._diag_last
+        self._diag_last = (now, stats['processed'])
+        rate = (stats['processed'] - last_n) / max(now - last_t, 1e-9)
+        r = self.last_result
+        recent = problem is not None and now - problem[0] <= self.problem_hold
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.WARN if recent else DiagnosticStatus.OK,
+            name=f'{self.get_fully_qualified_name().lstrip("/")}: pipeline',
+            hardware_id=frame_id,
+            message=problem[1] if recent else 'ok')
+        values = {
+            'rate (Hz)': f'{rate:.2f}',
+            'tracked lines': len(r.track_ids) if r is not None else 0,
+            'tracks in window': r.n_tracks if r is not None else 0,
+            'window fill': f'{r.window_fill if r is not None else 0}/{window}',
+            'frames received': stats['received'],
+            'frames processed': stats['processed'],
+            'frames dropped': stats['dropped'],
+            'frames skipped': stats['skipped'],
+            'errors': stats['errors'],
+            'last problem': problem[1] if problem is not None else 'none',
+            'last problem age (s)': f'{now - problem[0]:.1f}' if problem is not None else '',
+        }
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(msg)
 
     # --- worker --------------------------------------------------------------------------
 
@@ -251,8 +336,8 @@ class MlofcNode(Node):
         if result.skipped:
             self.stats['skipped'] += 1
             return
+        self.last_result = result           # before publishing: a subscriber may look at it
         self._publish(msg, gray, result, debug)
-        self.last_result = result
         self.stats['processed'] += 1
 
     def _publish(self, msg: Image, gray: Any, r: FrameResult, debug: bool) -> None:

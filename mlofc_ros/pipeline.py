@@ -44,6 +44,8 @@ from mlofc_ros.tracks.window import TrackWindow
 
 #: Keys of :attr:`FrameResult.timings` (milliseconds).
 TIMING_KEYS = ('detect_track', 'undistort', 'window', 'solve', 'total')
+#: An image whose gray levels span at most this much is blank: no lines, the tracker skips it.
+BLANK_CONTRAST = 2
 
 
 @dataclass
@@ -316,11 +318,18 @@ class Pipeline:
 
         timings: Dict[str, float] = {}
         t = time.perf_counter()
-        try:
-            track_ids, segments = self._tracker.update(gray)
-        except Exception:
-            self._restart_tracks()      # its state may be half-updated: start clean next frame
-            raise
+        blank = int(gray.max()) - int(gray.min()) <= BLANK_CONTRAST
+        if blank:
+            # nothing to see (lens cap, dropped frame): the frame enters the window empty and
+            # the tracker carries its tracks from the last frame with content to the next
+            problems.append('blank image (no contrast): no lines')
+            track_ids, segments = np.zeros(0, np.uint32), np.zeros((0, 4), np.float32)
+        else:
+            try:
+                track_ids, segments = self._tracker.update(gray)
+            except Exception:
+                self._restart_tracks()  # its state may be half-updated: start clean next frame
+                raise
         track_ids = np.asarray(track_ids, dtype=np.uint32).ravel()
         segments = np.asarray(segments, dtype=np.float32).reshape(-1, 4)
         timings['detect_track'] = (time.perf_counter() - t) * 1e3
@@ -350,7 +359,7 @@ class Pipeline:
         focal = math.nan
         t = time.perf_counter()
         res = None
-        if fill >= 2 and len(win_ids):
+        if fill >= 2 and len(win_ids) and not blank:     # a blank frame observes no motion
             init = self.bodies.previous_labels(win_ids) if n_req > 0 else None
             if init is not None:
                 init = np.where(init < n_req, init, -1)
@@ -363,7 +372,7 @@ class Pipeline:
                 problems.append(f'solver: {exc}')
             except Exception as exc:  # noqa: B902 (a solver failure must not lose the frame)
                 problems.append(f'solver failed: {type(exc).__name__}: {exc}')
-        elif fill >= 2:
+        elif fill >= 2 and not blank:
             problems.append('no line tracks in the window')
         timings['solve'] = (time.perf_counter() - t) * 1e3
 

@@ -1,0 +1,492 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Bad input never takes the node down: images, camera_info, stamps, scenes, parameters.
+
+Every test runs MlofcNode in process next to a test node over real DDS; warnings are read from
+``/rosout`` as any ROS tool would see them, the node's health from ``/diagnostics``.
+"""
+import math
+import threading
+import time
+from typing import Callable, Dict, List
+
+import cv2
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import TwistWithCovarianceStamped
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Log, Parameter as ParameterMsg
+from rcl_interfaces.srv import GetParameters, SetParameters
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile,
+                       ReliabilityPolicy)
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from test_pipeline import small_sequence
+
+from mlofc_ros.image import gray_to_image_fields, image_msg_to_gray
+from mlofc_ros.node import MlofcNode
+from mlofc_ros.ros_messages import parse_segments_msg, parse_twist_msg, stamp_to_seconds
+
+pytestmark = pytest.mark.ros
+
+FRAME_ID = 'camera_optical_frame'
+LOG_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+@pytest.fixture(scope='module')
+def ros():
+    rclpy.init()
+    yield
+    rclpy.try_shutdown()
+
+
+def stamp(msg, t: float):
+    msg.header.stamp.sec = int(math.floor(t))
+    msg.header.stamp.nanosec = int(round((t - math.floor(t)) * 1e9))
+    msg.header.frame_id = FRAME_ID
+    return msg
+
+
+def image_msg(gray: np.ndarray, t: float, encoding: str = 'mono8') -> Image:
+    msg = Image()
+    for key, value in gray_to_image_fields(gray, encoding).items():
+        setattr(msg, key, value)
+    return stamp(msg, t)
+
+
+def stamp_of(msg) -> float:
+    return round(stamp_to_seconds(msg.header.stamp), 6)
+
+
+class Harness:
+    """The node under test and a test node in one executor, plus its /rosout warnings."""
+
+    def __init__(self, node: MlofcNode) -> None:
+        self.mlofc = node
+        self.ns = node.get_namespace()
+        self.node = rclpy.create_node('robustness_harness', namespace=self.ns)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(node)
+        self.executor.add_node(self.node)
+        self.lock = threading.Lock()
+        name = node.get_logger().name
+        self.logs: List[Log] = []
+        self.node.create_subscription(Log, '/rosout', self._on_log, LOG_QOS)
+        self._log_name = name
+        self.clouds = self.collect(PointCloud2, f'{self.ns}/mlofc/segments')
+        self.image_pub = self.node.create_publisher(Image, f'{self.ns}/image',
+                                                    qos_profile_sensor_data)
+        self.info_pub = self.node.create_publisher(CameraInfo, f'{self.ns}/camera_info',
+                                                   qos_profile_sensor_data)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        assert self.wait(lambda: self.image_pub.get_subscription_count() == 1
+                         and self.info_pub.get_subscription_count() == 1
+                         and self.node.count_publishers(f'{self.ns}/mlofc/segments') == 1,
+                         20.0), 'node did not come up'
+
+    def _on_log(self, msg: Log) -> None:
+        if msg.name == self._log_name:
+            with self.lock:
+                self.logs.append(msg)
+
+    def collect(self, msg_type, topic: str) -> List:
+        box: List = []
+
+        def cb(msg):
+            with self.lock:
+                box.append(msg)
+        self.node.create_subscription(msg_type, topic, cb, QoSProfile(depth=100))
+        return box
+
+    def twists(self, n: int) -> Dict[int, List]:
+        return {i: self.collect(TwistWithCovarianceStamped, f'{self.ns}/mlofc/body_{i}/twist')
+                for i in range(n)}
+
+    @staticmethod
+    def wait(pred: Callable[[], bool], timeout: float = 30.0) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if pred():
+                return True
+            time.sleep(0.01)
+        return pred()
+
+    def warnings(self, text: str) -> List[str]:
+        with self.lock:
+            return [m.msg for m in self.logs if m.level >= Log.WARN and text in m.msg]
+
+    def infos(self, text: str) -> List[str]:
+        with self.lock:
+            return [m.msg for m in self.logs if text in m.msg]
+
+    def deliver(self, msg: Image) -> None:
+        """Publish until the node received it (best effort), without duplicates."""
+        for _ in range(5):
+            before = self.mlofc.stats['received']
+            self.image_pub.publish(msg)
+            if self.wait(lambda: self.mlofc.stats['received'] > before, 2.0):
+                return
+        raise AssertionError('the node never received the image')
+
+    def frame(self, msg: Image, timeout: float = 60.0) -> PointCloud2:
+        """Deliver a good image and return its ~/segments cloud."""
+        n = len(self.clouds)
+        self.deliver(msg)
+        assert self.wait(lambda: len(self.clouds) > n, timeout), 'no ~/segments'
+        assert len(self.clouds) == n + 1
+        cloud = self.clouds[-1]
+        assert stamp_of(cloud) == stamp_of(msg)
+        return cloud
+
+    def skipped(self, msg: Image, timeout: float = 30.0) -> None:
+        """Deliver an image the node must skip (no cloud)."""
+        n, s = len(self.clouds), self.mlofc.stats['skipped']
+        self.deliver(msg)
+        assert self.wait(lambda: self.mlofc.stats['skipped'] > s, timeout), 'not skipped'
+        assert self.mlofc.pending_frames() == 0 and len(self.clouds) == n
+
+    def call(self, srv_type, name: str, request, timeout: float = 20.0):
+        client = self.node.create_client(srv_type, name)
+        assert client.wait_for_service(timeout_sec=timeout), f'no service {name}'
+        future = client.call_async(request)
+        assert self.wait(future.done, timeout), f'{name} did not answer'
+        self.node.destroy_client(client)
+        return future.result()
+
+    def set_params(self, **values):
+        req = SetParameters.Request()
+        req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
+        return self.call(SetParameters, f'{self.ns}/mlofc/set_parameters', req).results
+
+    def get_params(self, *names):
+        req = GetParameters.Request()
+        req.names = list(names)
+        values = self.call(GetParameters, f'{self.ns}/mlofc/get_parameters', req).values
+        return [Parameter.from_parameter_msg(ParameterMsg(name=n, value=v)).value
+                for n, v in zip(names, values)]
+
+    def accounting(self) -> Dict[str, int]:
+        """Check received = processed + dropped + skipped and one cloud per processed frame."""
+        assert self.wait(lambda: self.mlofc.pending_frames() == 0
+                         and len(self.clouds) == self.mlofc.stats['processed'], 10.0)
+        s = dict(self.mlofc.stats)
+        assert s['processed'] + s['dropped'] + s['skipped'] + s['errors'] == s['received'], s
+        assert s['errors'] == 0, s
+        assert len(self.clouds) == s['processed'], s
+        return s
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.thread.join(timeout=10)
+        self.mlofc.destroy_node()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def harness(ros, request):
+    made: List[Harness] = []
+
+    def make(namespace: str, **params) -> Harness:
+        node = MlofcNode(namespace=namespace, parameter_overrides=[
+            Parameter(k, value=v) for k, v in params.items()])
+        made.append(Harness(node))
+        return made[-1]
+    yield make
+    for h in made:
+        h.close()
+
+
+def bad_images(good: np.ndarray):
+    """(what, Image, words the warning must contain) for every kind of broken image."""
+    def msg(**fields) -> Image:
+        m = image_msg(good, 50.0)
+        for k, v in fields.items():
+            setattr(m, k, v)
+        return m
+    h, w = good.shape
+    nan = np.full((16, 16), np.nan, np.float32)
+    return [
+        ('unsupported encoding', msg(encoding='jpeg'), 'unsupported image encoding'),
+        ('height*step != len(data)', msg(data=bytes(h * w - w)), 'expected height*step'),
+        ('step smaller than a row', msg(step=w - 1, data=bytes(h * (w - 1))), 'shorter than'),
+        ('0x0', msg(height=0, width=0, step=0, data=b''), 'size must be positive'),
+        ('1x1', msg(height=1, width=1, step=1, data=b'\x80'), 'too small'),
+        ('20000x20000 header', msg(height=20000, width=20000, step=20000, data=b''),
+         'max_pixels'),
+        ('all-NaN 32FC1', msg(height=16, width=16, encoding='32FC1', step=64,
+                              data=nan.tobytes()), 'no finite pixels'),
+    ]
+
+
+# --- images ----------------------------------------------------------------------------------
+
+
+def test_bad_images_are_skipped_with_one_warning_per_kind_and_the_node_goes_on(harness):
+    seq = small_sequence()
+    h = harness('/rob_img', warn_period=60.0, focal_length=300.0)
+    twists = h.twists(2)
+    for k in range(2):
+        assert h.frame(image_msg(seq.frames[k], seq.stamps[k])).width > 0
+    for what, msg, words in bad_images(seq.frames[0]):
+        h.skipped(msg)
+        assert h.wait(lambda: h.warnings(words), 10.0), f'no warning about {what}'
+        assert len(h.warnings(words)) == 1, h.warnings(words)
+    # the decoder refuses the forged header before allocating its 400 Mpx
+    with pytest.raises(ValueError, match='max_pixels'):
+        image_msg_to_gray(bad_images(seq.frames[0])[5][1], max_pixels=h.mlofc._values[
+            'max_pixels'])
+    # the same problem again within warn_period: skipped, counted, not warned again
+    for _ in range(3):
+        h.skipped(bad_images(seq.frames[0])[0][1])
+    time.sleep(0.3)
+    assert len(h.warnings('unsupported image encoding')) == 1
+    # a blank frame: an EMPTY cloud with its stamp, a warning, no twist
+    blank = h.frame(image_msg(np.full((240, 320), 128, np.uint8), seq.stamps[2]))
+    assert blank.width == 0 and len(blank.data) == 0
+    assert h.wait(lambda: h.warnings('blank image'), 10.0)
+    # the next good frames are answered normally
+    for k in (3, 4):
+        cloud = h.frame(image_msg(seq.frames[k], seq.stamps[k]))
+        assert cloud.width > 20
+    assert h.wait(lambda: any(stamp_of(t) == round(seq.stamps[4], 6) for t in twists[0]), 10.0)
+    blank_t = round(seq.stamps[2], 6)
+    assert not any(stamp_of(t) == blank_t for box in twists.values() for t in box)
+    s = h.accounting()
+    assert s['skipped'] == 7 + 3 and s['processed'] == 5, s
+
+
+# --- camera_info -----------------------------------------------------------------------------
+
+
+def camera_info(camera, size=(320, 240), **fields) -> CameraInfo:
+    msg = stamp(CameraInfo(), 0.0)
+    msg.width, msg.height = size
+    msg.k = [camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]
+    msg.d = list(camera.d) or [0.0] * 5
+    msg.distortion_model = camera.distortion_model
+    for k, v in fields.items():
+        setattr(msg, k, v)
+    return msg
+
+
+def test_bad_camera_info_is_warned_once_per_change_and_replaced(harness):
+    seq = small_sequence()
+    cam = seq.camera
+    h = harness('/rob_cam', warn_period=0.0)
+    bad = [('K all zeros', {'k': [0.0] * 9}, 'all zeros'),
+           ('K NaN', {'k': [math.nan] * 9}, 'non-finite'),
+           ('D of the wrong length', {'d': [0.1, 0.2]}, 'coefficients'),
+           ('unknown distortion model',
+            {'distortion_model': 'fisheye9', 'd': [0.1, 0.0, 0.0, 0.0, 0.0]},
+            'unknown distortion model'),
+           ('K all zeros again', {'k': [0.0] * 9}, 'all zeros')]
+
+    def publish_info(msg, times=3):
+        for _ in range(times):
+            h.info_pub.publish(msg)
+            time.sleep(0.05)
+
+    # calibrated: the camera's focal length is used
+    publish_info(camera_info(cam))
+    h.frame(image_msg(seq.frames[0], seq.stamps[0]))
+    h.frame(image_msg(seq.frames[1], seq.stamps[1]))
+    assert h.mlofc.last_result.focal_length == cam.fx
+    for what, fields, words in bad:
+        publish_info(camera_info(cam, **fields))
+        assert h.wait(lambda: h.mlofc._camera_problem is not None
+                      and words in h.mlofc._camera_problem, 10.0), what
+    time.sleep(0.3)
+    assert len(h.warnings('all zeros')) == 2        # once per change, not once per message
+    for words in ('non-finite', 'coefficients', 'unknown distortion model'):
+        assert len(h.warnings(words)) == 1, (words, h.warnings('camera_info'))
+    assert all('estimated from the images' in w for w in h.warnings('ignoring camera_info'))
+    # no usable camera_info: the focal length is estimated ...
+    h.frame(image_msg(seq.frames[2], seq.stamps[2]))
+    f = h.mlofc.last_result.focal_length
+    assert math.isfinite(f) and f > 0 and f != cam.fx
+    # ... or focal_length used when set (and the warning says so)
+    assert h.set_params(focal_length=250.0)[0].successful
+    publish_info(camera_info(cam, k=[math.nan] * 9))
+    assert h.wait(lambda: h.warnings('using focal_length = 250 px'), 10.0)
+    h.frame(image_msg(seq.frames[3], seq.stamps[3]))
+    assert h.mlofc.last_result.focal_length == 250.0
+    # a good camera_info again is used again
+    assert h.set_params(focal_length=0.0)[0].successful
+    publish_info(camera_info(cam))
+    assert h.wait(lambda: h.infos('camera_info is usable again'), 10.0)
+    h.frame(image_msg(seq.frames[4], seq.stamps[4]))
+    assert h.mlofc.last_result.focal_length == cam.fx
+    h.accounting()
+
+
+# --- stamps ----------------------------------------------------------------------------------
+
+
+def test_stamps_going_back_duplicated_or_far_apart(harness):
+    seq = small_sequence()
+    h = harness('/rob_time', warn_period=0.0, focal_length=300.0, window=4, num_bodies=2)
+    twists = h.twists(2)
+    t0 = 100.0
+    for k in range(4):
+        h.frame(image_msg(seq.frames[k], t0 + k / 30))
+        assert h.mlofc.last_result.window_fill == k + 1
+    # bag loop: the stamp goes back -> tracks and window restart, said once
+    t1 = t0 - 5.0
+    for k in range(3):
+        h.frame(image_msg(seq.frames[4 + k], t1 + k / 30))
+        assert h.mlofc.last_result.window_fill == k + 1
+    assert h.wait(lambda: h.warnings('stamp went back'), 10.0)
+    time.sleep(0.2)
+    assert len(h.warnings('stamp went back')) == 1
+    # a duplicate stamp: skipped (no cloud, no division by zero), the window untouched
+    h.skipped(image_msg(seq.frames[7], t1 + 2 / 30))
+    assert h.wait(lambda: h.warnings('duplicate stamp'), 10.0)
+    h.frame(image_msg(seq.frames[7], t1 + 3 / 30))
+    r = h.mlofc.last_result
+    assert r.window_fill == 4 and abs(r.frame_interval - 1 / 30) < 1e-6
+    assert np.all(np.isfinite(r.angular_velocities[r.body_valid]))
+    assert h.wait(lambda: any(stamp_of(t) == round(t1 + 3 / 30, 6) for t in twists[0]), 10.0)
+    for box in twists.values():
+        for t in box:
+            w, c = parse_twist_msg(t)
+            assert np.all(np.isfinite(w)) and np.all(np.isfinite(c)) and np.abs(w).max() < 10
+    # a gap of many frames: the window restarts
+    h.frame(image_msg(seq.frames[0], t1 + 3 / 30 + 10.0))
+    assert h.mlofc.last_result.window_fill == 1
+    assert h.wait(lambda: h.warnings('window restarted'), 10.0)
+    assert len(h.warnings('stamp went back')) == 1
+    s = h.accounting()
+    assert s['skipped'] == 1 and s['processed'] == 9
+
+
+# --- parameters ------------------------------------------------------------------------------
+
+
+def test_invalid_parameters_are_rejected_with_a_reason_and_the_old_value_kept(harness):
+    h = harness('/rob_par', window=4)
+    names = ('num_bodies', 'window', 'method', 'focal_length', 'max_pixels', 'queue_size',
+             'warn_period', 'publish_debug_image', 'max_frame_gap', 'label_memory')
+    before = h.get_params(*names)
+    cases = [('num_bodies', -1), ('num_bodies', 9), ('num_bodies', 2.0), ('num_bodies', '3'),
+             ('num_bodies', True), ('window', 1), ('window', 31), ('window', [4, 5]),
+             ('method', 'nope'), ('method', 3), ('focal_length', -1.0),
+             ('focal_length', math.nan), ('focal_length', math.inf), ('focal_length', 'x'),
+             ('focal_length', 2e6), ('max_pixels', 0), ('queue_size', 0),
+             ('queue_size', 101), ('warn_period', -1.0), ('publish_debug_image', 1),
+             ('publish_debug_image', 'yes'), ('max_frame_gap', -0.5), ('label_memory', 1001)]
+    for name, value in cases:
+        res = h.set_params(**{name: value})[0]
+        assert not res.successful, (name, value)
+        assert res.reason and (name in res.reason or 'type' in res.reason.lower()
+                               or 'range' in res.reason.lower()), (name, value, res.reason)
+    assert h.get_params(*names) == before
+    assert h.mlofc._values['window'] == 4 and h.mlofc._values['num_bodies'] == 2
+    # the node still works with the old values
+    seq = small_sequence()
+    h.frame(image_msg(seq.frames[0], 1.0))
+    h.frame(image_msg(seq.frames[1], 1.0 + 1 / 30))
+    assert h.mlofc.last_result.window_fill == 2
+
+
+# --- accounting and /diagnostics -------------------------------------------------------------
+
+
+def statuses(box: List, name: str) -> List[DiagnosticStatus]:
+    return [s for m in list(box) for s in m.status if s.name == name]
+
+
+def test_queue_drops_are_counted_and_diagnostics_report_at_1hz(harness):
+    seq = small_sequence()
+    h = harness('/rob_diag', queue_size=1, warn_period=0.0, focal_length=300.0)
+    h.mlofc.problem_hold = 1.5
+    diag = h.collect(DiagnosticArray, '/diagnostics')
+    name = 'rob_diag/mlofc: pipeline'
+    for k in range(3):
+        h.frame(image_msg(seq.frames[k], seq.stamps[k]))
+    assert h.wait(lambda: len(statuses(diag, name)) >= 2, 10.0)
+    st = statuses(diag, name)[-1]
+    kv = {v.key: v.value for v in st.values}
+    assert st.level == DiagnosticStatus.OK, (st.message, kv)
+    assert st.hardware_id == FRAME_ID
+    for key in ('rate (Hz)', 'tracked lines', 'window fill', 'frames received',
+                'frames processed', 'frames dropped', 'last problem'):
+        assert key in kv, kv
+    assert int(kv['frames processed']) == 3 and int(kv['tracked lines']) > 20
+    assert kv['window fill'] == '3/5' and kv['last problem'] == 'none'
+    # 1 Hz: consecutive messages of this node about a second apart
+    n = len(diag)
+    assert h.wait(lambda: len(diag) >= n + 2, 10.0)
+    stamps = [stamp_to_seconds(m.header.stamp) for m in diag if statuses([m], name)]
+    gaps = np.diff(stamps[-3:])
+    assert np.all((gaps > 0.7) & (gaps < 1.6)), gaps
+    # a burst into a queue of one: the stalest frames are dropped and counted
+    burst = [seq.stamps[3] + k / 30 for k in range(10)]
+    for k, t in enumerate(burst):
+        h.image_pub.publish(image_msg(seq.frames[k % 8], t))
+    assert h.wait(lambda: h.mlofc.pending_frames() == 0 and h.clouds
+                  and stamp_of(h.clouds[-1]) == round(burst[-1], 6), 60.0)
+    s = h.accounting()
+    assert s['dropped'] > 0, s
+    # a rate while frames flow, the drop count, then a problem turns the level to WARN ...
+    assert h.wait(lambda: int({v.key: v.value for v in statuses(diag, name)[-1].values}[
+        'frames dropped']) == s['dropped'], 5.0)
+    assert any(float({v.key: v.value for v in x.values}['rate (Hz)']) > 0
+               for x in statuses(diag, name))
+    bad = image_msg(seq.frames[0], 99.0, 'mono8')
+    bad.encoding = 'jpeg'
+    h.skipped(bad)
+    assert h.wait(lambda: 'unsupported image encoding' in statuses(diag, name)[-1].message,
+                  5.0)
+    st = statuses(diag, name)[-1]
+    assert st.level == DiagnosticStatus.WARN
+    assert 'unsupported image encoding' in {v.key: v.value for v in st.values}['last problem']
+    # ... and back to OK once the problem is old, the last problem still listed
+    assert h.wait(lambda: statuses(diag, name)[-1].level == DiagnosticStatus.OK, 6.0)
+    kv = {v.key: v.value for v in statuses(diag, name)[-1].values}
+    assert 'unsupported' in kv['last problem'] and float(kv['rate (Hz)']) == 0.0
+
+
+# --- scenes the model cannot explain ----------------------------------------------------------
+
+
+def lines_image(k: int, n_lines: int) -> np.ndarray:
+    img = np.full((240, 320), 60, np.uint8)
+    for i in range(n_lines):
+        cv2.line(img, (40 + 2 * k + 120 * i, 40), (100 + 2 * k + 120 * i, 200), 220, 1)
+    return cv2.GaussianBlur(img, (5, 5), 1.0)
+
+
+def test_scenes_the_model_cannot_explain_give_unassigned_labels_and_no_twists(harness):
+    h = harness('/rob_scene', warn_period=0.0, focal_length=300.0, num_bodies=2,
+                label_memory=0)
+    twists = h.twists(4)
+    # one line (its two edges) for two bodies; then two lines for three bodies
+    t = 10.0
+    for n_lines, n_bodies in ((1, 2), (2, 3)):
+        assert h.set_params(num_bodies=n_bodies)[0].successful
+        for k in range(4):
+            cloud = h.frame(image_msg(lines_image(k, n_lines), t))
+            t += 1 / 30
+            _, _, labels, _ = parse_segments_msg(cloud)
+            assert 0 < len(labels) <= 2 * n_lines and np.all(labels == -1), labels
+        assert h.wait(lambda: h.warnings('usable tracks'), 10.0)
+        t += 10.0
+    time.sleep(0.3)
+    assert not any(twists.values()), {i: len(b) for i, b in twists.items()}
+    h.accounting()
