@@ -420,8 +420,17 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
     else:
         lines.append(f'- The node kept up with none of the rates (lowest '
                      f'{rows[0]["rate"]:g} Hz).' if rows else '- No rate was run.')
+    cpu = np.array([r['proc_cpu'] for r in rows], dtype=float)
+    wall_ms = np.array([r['proc_wall'] for r in rows], dtype=float)
+    cpu_med = float(np.nanmedian(cpu)) if np.isfinite(cpu).any() else math.nan
+    wall_med = float(np.nanmedian(wall_ms)) if np.isfinite(wall_ms).any() else math.nan
     lines += [f'- Highest answer rate seen: {fastest:.1f} segments messages/s (throughput '
-              'limit: above it the node drops the stalest queued frames).', '',
+              'limit: above it the node drops the stalest queued frames).',
+              f'- Inside the node `Pipeline.process` took {wall_med:.0f} ms wall but '
+              f'{cpu_med:.0f} ms of worker-thread CPU (medians over the rates): the node waited '
+              'for a core most of the time on this shared machine. Were it alone on a core, '
+              f'the CPU time alone would allow about {1e3 / cpu_med:.0f} Hz (an estimate, not '
+              'measured here).', '',
               '## Per rate', '',
               common.markdown_table(
                   ['rate Hz', 'achieved Hz', 'published', 'node received', 'answered',
