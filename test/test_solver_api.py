@@ -150,3 +150,16 @@ def test_multi_frame_beats_two_frames():
             res = segment_lines(tracks, 3, intrinsics=intr)
             errs[k].append(misclassified(res.labels, labels, 3))
     assert np.mean(errs[5]) < 0.5 * np.mean(errs[2])
+
+
+@pytest.mark.parametrize('n_frames', [2, 5])
+def test_stitched_outlier_tracks_do_not_move_the_bodies(n_frames):
+    """15% tracks whose every frame is a different real line (mis-association)."""
+    tracks, labels, omegas, intr = random_scene(3, 25, n_frames=n_frames, noise=1.0, seed=70)
+    rng = np.random.default_rng(1)
+    n_out = 13
+    out = np.stack([tracks[rng.integers(0, len(tracks), n_out), k] for k in range(n_frames)], 1)
+    res = segment_lines(np.concatenate([tracks, out]), 3, intrinsics=intr)
+    assert misclassified(res.labels[:len(tracks)], labels, 3) <= 0.03
+    assert np.mean(res.labels[len(tracks):] == -1) >= 0.8
+    assert matched_rotation_error(res.angular_velocities, omegas) < 0.15

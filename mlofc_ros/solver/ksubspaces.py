@@ -16,7 +16,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from .models import fit_stats, quad_costs, TrackStats
+from .models import chi2_quantile, fit_stats, quad_costs, TrackStats
 
 
 def assign(costs: np.ndarray, threshold: Optional[np.ndarray] = None) -> np.ndarray:
@@ -50,8 +50,9 @@ def _reseed_empty(labels: np.ndarray, costs: np.ndarray, n: int, min_tracks: int
 
 
 def ksubspaces(stats: TrackStats, n: int, labels: np.ndarray, max_iter: int = 100,
-               threshold: Optional[np.ndarray] = None,
-               min_tracks: int = 2) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+               threshold: Optional[np.ndarray] = None, min_tracks: int = 2,
+               trim_dof: Optional[np.ndarray] = None, trim_p: float = 0.9999
+               ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Refine a labelling until it stops changing.
 
     Parameters
@@ -65,6 +66,10 @@ def ksubspaces(stats: TrackStats, n: int, labels: np.ndarray, max_iter: int = 10
     threshold : (N,), optional
         Per-track outlier threshold on the cost: tracks above it get ``-1`` and do not move
         any body.
+    trim_dof : (N,), optional
+        Degrees of freedom of every track's cost: when given (and no ``threshold``), every
+        iteration re-estimates the noise from the median cost and excludes the tracks above the
+        ``trim_p`` chi-square bound from the next fit, so gross outliers never pull a body.
 
     Returns
     -------
@@ -75,13 +80,26 @@ def ksubspaces(stats: TrackStats, n: int, labels: np.ndarray, max_iter: int = 10
     for _ in range(max_iter):
         c, _ = fit_stats(stats, labels, n)
         costs = quad_costs(stats, c)
-        new = assign(costs, threshold)
+        bound = threshold
+        if bound is None and trim_dof is not None:
+            bound = trim_bound(costs, trim_dof, trim_p)
+        new = assign(costs, bound)
         if threshold is None:
             new = _reseed_empty(new, costs, n, min_tracks)
         if np.array_equal(new, labels):
             break
         labels = new
     return labels, c, costs
+
+
+def trim_bound(costs: np.ndarray, dof: np.ndarray, p: float = 0.9999,
+               floor: float = 1e-8) -> np.ndarray:
+    """Per-track chi-square bound ``(N,)`` at the noise estimated from the median best cost."""
+    ok = np.isfinite(costs).all(axis=1) & (dof > 0)
+    if not np.any(ok):
+        return np.full(costs.shape[0], np.inf)
+    best = np.min(costs[ok], axis=1) / chi2_quantile(0.5, dof[ok])
+    return chi2_quantile(p, dof) * max(float(np.median(best)), floor)
 
 
 def total_cost(costs: np.ndarray, labels: np.ndarray, cap: Optional[np.ndarray] = None) -> float:

@@ -72,28 +72,40 @@ def _sample_pairs(rng: np.random.Generator, pool: np.ndarray, mid: np.ndarray,
     return np.stack([first, second], axis=1)
 
 
-def sequential_msac(stats: TrackStats, tracks: np.ndarray, n: int, cap: np.ndarray,
-                    rng: np.random.Generator, n_samples: int = 200) -> np.ndarray:
-    """Labels from fitting one body at a time to the tracks not yet explained (MSAC)."""
+def sequential_msac(stats: TrackStats, tracks: np.ndarray, n: int, dof: np.ndarray,
+                    rng: np.random.Generator, n_samples: int = 200
+                    ) -> Tuple[np.ndarray, float]:
+    """Labels from fitting one body at a time to the tracks not yet explained; noise (px).
+
+    Scale-free: a hypothesis is scored by a low quantile of its per-degree-of-freedom costs
+    over the remaining tracks (least k-th order statistic, k = half the expected share of the
+    largest remaining body), so no noise level is needed up front; the noise is then estimated
+    from the first, largest body and sets the chi-square inlier bound.
+    """
     mid = _midpoints(tracks)
     labels = np.full(stats.A.shape[0], -1, dtype=np.int64)
     pool = np.flatnonzero(stats.usable)
+    sigma2 = None
     for body in range(n):
         if pool.size < 2:
             break
-        if body == n - 1:
-            labels[pool] = body
-            break
+        # the last body too is a hypothesis search: what is left also holds the outliers
         pairs = _sample_pairs(rng, pool, mid, n_samples)
-        a = stats.A[pairs[:, 0]] + stats.A[pairs[:, 1]]
-        g = stats.g[pairs[:, 0]] + stats.g[pairs[:, 1]]
-        hyp = solve_normal_equations(a, g)                            # (H, 3)
+        hyp = solve_normal_equations(stats.A[pairs[:, 0]] + stats.A[pairs[:, 1]],
+                                     stats.g[pairs[:, 0]] + stats.g[pairs[:, 1]])
         costs = quad_costs(stats, hyp)[pool]                          # (|pool|, H)
-        score = np.sum(np.minimum(costs, cap[pool, None]), axis=0)
-        inl = pool[costs[:, int(np.argmin(score))] < cap[pool]]
+        per_dof = costs / np.maximum(dof[pool, None], 1.0)
+        q = 0.5 / (n - body)
+        kth = np.quantile(per_dof, q, axis=0)
+        best = int(np.argmin(kth))
+        if sigma2 is None:
+            # inliers of the best body: per-dof chi-square, median ~ chi2_median(d) / d
+            d = float(np.median(dof[pool]))
+            sigma2 = max(float(kth[best]) * d / float(chi2_quantile(0.5, d)), 1e-12)
+        inl = pool[costs[:, best] < chi2_quantile(OUTLIER_P, dof[pool]) * sigma2]
         labels[inl] = body
         pool = np.setdiff1d(pool, inl)
-    return labels
+    return labels, float(np.sqrt(sigma2)) if sigma2 is not None else 1.0
 
 
 def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
@@ -120,15 +132,16 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
                 continue
             if np.all(np.isfinite(u)):
                 starts.append((name, assign(quad_costs(stats, u[:, :3]))))
-    refined = [(name,) + ksubspaces(stats, n, lab) for name, lab in starts]
+    if n > 1:
+        starts.append(('msac', sequential_msac(stats, tracks, n, dof, rng)[0]))
+    # trimmed: gross outliers (mis-tracks) are excluded from every fit from the start
+    refined = [(name,) + ksubspaces(stats, n, lab, trim_dof=dof) for name, lab in starts]
     if sigma is None:
-        # exact residuals (not the quadratic form) so that zero noise gives zero, not rounding
+        # exact residuals (not the quadratic form) so that zero noise gives zero, not rounding;
+        # the best-fitting candidate gives the smallest (least inflated) estimate
         sigma = min(noise_sigma(track_costs(flows, c, weighted=True), lab, dof)
                     for _, lab, c, _ in refined)
     cap = chi2_quantile(OUTLIER_P, dof) * sigma ** 2
-    if n > 1:
-        lab = sequential_msac(stats, tracks, n, cap, rng)
-        refined.append(('msac',) + ksubspaces(stats, n, lab))
     scores = [total_cost(costs, lab, cap) for _, lab, _, costs in refined]
     name, lab, c, _ = refined[int(np.argmin(scores))]
     # final pass with exact costs and outlier rejection: outliers move no body
