@@ -19,8 +19,10 @@ from mlofc_ros.solver.lines import rotation_matrix
 
 def random_scene(n_bodies, lines_per_body, n_frames=2, noise=0.0, f=1000.0, size=1000,
                  deg=(2.0, 6.0), seed=0, vertical=0, own_centre=False):
-    """Bodies rotating about the camera centre (or their own centre); returns tracks, labels,
-    rotation vectors per frame and intrinsics."""
+    """Make bodies rotating about the camera centre (or their own centre).
+
+    Returns tracks, labels, rotation vectors per frame and intrinsics.
+    """
     rng = np.random.default_rng(seed)
     cx = cy = size / 2.0
     K = np.array([[f, 0, cx], [0, f, cy], [0, 0, 1.0]])

@@ -243,7 +243,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
 
 def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
              init_labels=None) -> SegmentationResult:
-    """The 'general' method: rotation AND translation per body (see :mod:`.general`).
+    """Solve with the 'general' method: rotation AND translation per body (:mod:`.general`).
 
     Starts from the rotation-only solution ``rot`` (which also supplies the focal length when
     it was unknown) and a spatial clustering; needs three frames, else returns ``rot``.
@@ -292,7 +292,7 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
 
 def assign_with_motions(tracks, angular_velocities, intrinsics: Sequence[float], *,
                         weighted: bool = False) -> SegmentationResult:
-    """The floor: assign every track with GIVEN (true) motions, no estimation.
+    """Assign every track with GIVEN (true) motions, no estimation: the floor.
 
     ``angular_velocities (n, 3)`` are rotation vectors in rad per frame interval (camera optical
     frame). ``weighted=False`` uses the paper's algebraic residual, ``True`` the Mahalanobis

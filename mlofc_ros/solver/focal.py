@@ -35,8 +35,10 @@ from .veronese import exponents, monomial_index, relation_space
 
 
 def unknown_f_rows_from_normals(m: np.ndarray, e: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """Rows ``(..., 6)`` from pixel-line normals ``m``, directions ``e`` (orthogonal to ``m``) and
-    flows ``g``; see the module docstring."""
+    """Build the f-unknown rows ``(..., 6)`` (see the module docstring).
+
+    From pixel-line normals ``m``, directions ``e`` (orthogonal to ``m``) and flows ``g``.
+    """
     a, b, c = m[..., 0], m[..., 1], m[..., 2]
     ex, ey, ez = e[..., 0], e[..., 1], e[..., 2]
     return np.stack([-b * ex + a * ey, -c * ey, c * ex, b * ez, -a * ez,

@@ -169,8 +169,10 @@ def fit_body(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, t0: np.ndar
 
 
 def _hemisphere(n: int = 32) -> np.ndarray:
-    """``(n, 3)`` directions spread over a hemisphere (Fibonacci lattice): the cost depends on
-    T only through its span, so T and -T are the same start."""
+    """Spread ``(n, 3)`` directions over a hemisphere (Fibonacci lattice).
+
+    The cost depends on T only through its span, so T and -T are the same start.
+    """
     k = np.arange(n) + 0.5
     z = k / n
     phi = np.pi * (1.0 + 5.0 ** 0.5) * k
@@ -185,8 +187,10 @@ T_STARTS = _hemisphere()
 def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
                         t0: Optional[np.ndarray] = None, iterations: int = 15,
                         keep: int = 3) -> Tuple[np.ndarray, np.ndarray, float]:
-    """:func:`fit_body` from ``t0`` if given, else from the ``keep`` best of a scan of
-    :data:`T_STARTS` at ``w0`` (the cost is not convex in the direction of T)."""
+    """Run :func:`fit_body` from ``t0``, or from the ``keep`` best of a scan of T directions.
+
+    The scan evaluates :data:`T_STARTS` at ``w0``: the cost is not convex in the direction of T.
+    """
     if t0 is not None:
         starts = np.atleast_2d(t0)
     else:
@@ -204,8 +208,10 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
 
 
 def general_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray) -> np.ndarray:
-    """Cost ``(N, n)`` of every track under every body ``(W (n, 3), T (n, 3))``; nan below 3
-    frames (no constraint on a general motion)."""
+    """Cost ``(N, n)`` of every track under every body ``(W (n, 3), T (n, 3))``.
+
+    ``nan`` for tracks with fewer than 3 frames (no constraint on a general motion).
+    """
     idx = np.arange(obs.n_tracks)
     out = np.empty((obs.n_tracks, W.shape[0]))
     for b in range(W.shape[0]):                          # bodies, not lines

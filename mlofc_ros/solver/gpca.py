@@ -58,7 +58,7 @@ def multibody_vector(rows: np.ndarray, degree: int,
 
 def recover_normals(rows: np.ndarray, coeffs: np.ndarray, degree: int, n: int,
                     delta: float = 1e-10) -> np.ndarray:
-    """The paper's Algorithm 1, step 5: hyperplane normals ``(n, D)`` (last entry 1).
+    """Recover the hyperplane normals ``(n, D)`` (last entry 1): the paper's Algorithm 1, step 5.
 
     For ``i = n .. 1`` pick the row minimising
     ``(|p(z)| / |Pi grad p(z)| + delta) / (prod_{l>i} |z . u_l| / |Pi u_l| + delta)``

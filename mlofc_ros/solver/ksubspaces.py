@@ -20,8 +20,10 @@ from .models import chi2_quantile, fit_stats, quad_costs, TrackStats
 
 
 def assign(costs: np.ndarray, threshold: Optional[np.ndarray] = None) -> np.ndarray:
-    """Labels ``(N,)`` = argmin of ``costs (N, n)``; ``-1`` for unusable tracks (nan) and above
-    ``threshold (N,)`` when given (outliers)."""
+    """Label ``(N,)`` every track with the argmin of ``costs (N, n)``.
+
+    ``-1`` for unusable tracks (nan) and above ``threshold (N,)`` when given (outliers).
+    """
     ok = np.isfinite(costs).all(axis=1)
     labels = np.full(costs.shape[0], -1, dtype=np.int64)
     if costs.shape[1] == 0:

@@ -91,7 +91,7 @@ def normalise_points(uv: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
 
 def interpretation_normals(tracks: np.ndarray, intrinsics: Intrinsics,
                            endpoint_sigma: float = 1.0) -> Tuple[np.ndarray, np.ndarray]:
-    """Unit normals ``m`` and their covariance for every track and frame.
+    """Compute the unit normals ``m`` and their covariance for every track and frame.
 
     Parameters
     ----------

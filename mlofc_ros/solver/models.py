@@ -118,8 +118,11 @@ def fit_bodies(flows: LineFlows, track_labels: np.ndarray, n: int, weighted: boo
 
 
 def solve_normal_equations(info: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve ``info c = rhs`` per body; a relative ridge keeps rank-deficient (and empty)
-    bodies finite (a single line does not see the rotation about its own normal)."""
+    """Solve ``info c = rhs`` per body.
+
+    A relative ridge keeps rank-deficient (and empty) bodies finite: a single line does not see
+    the rotation about its own normal.
+    """
     scale = np.trace(info, axis1=-2, axis2=-1)[..., None, None] / 3.0
     ridge = 1e-9 * np.maximum(scale, 1e-300) * np.eye(3)
     return np.linalg.solve(info + ridge, rhs[..., None])[..., 0]
