@@ -23,7 +23,8 @@ Topics (relative names, remap as usual)::
     pub  /diagnostics        diagnostic_msgs/DiagnosticArray  1 Hz, see below
 
 Every output carries the input image's header (stamp, camera optical frame). A twist is
-published only for a body solved in that frame (finite angular velocity and covariance). Frames
+published only for a body solved in that frame (finite angular velocity and covariance, at
+least ``pipeline.MIN_BODY_TRACKS`` tracks: a twist is withheld rather than invented). Frames
 with an undecodable image or a duplicate stamp are skipped (no output, throttled warning); a
 processed frame without lines still gets its (empty) ``~/segments`` cloud. A stamp going back
 (bag loop) restarts tracks and window, a gap of ``max_frame_gap`` intervals the window. A bad

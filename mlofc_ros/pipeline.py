@@ -46,6 +46,9 @@ from mlofc_ros.tracks.window import TrackWindow
 TIMING_KEYS = ('detect_track', 'undistort', 'window', 'solve', 'total')
 #: An image whose gray levels span at most this much is blank: no lines, the tracker skips it.
 BLANK_CONTRAST = 2
+#: A body is reported (``body_valid``) only with at least this many tracks in the window: with
+#: fewer (num_bodies above what the scene holds) its fitted motion is mostly noise.
+MIN_BODY_TRACKS = 4
 
 
 @dataclass
@@ -73,7 +76,8 @@ class FrameResult:
     angular_covariances : (n, 3, 3) float64
         Their covariances, (rad/s)^2; ``inf`` diagonal when undetermined.
     body_valid : (n,) bool
-        True when the body's angular velocity and covariance are finite (solved this frame).
+        True when the body's angular velocity and covariance are finite (solved this frame)
+        from at least ``MIN_BODY_TRACKS`` tracks of the window.
     timings : dict
         Milliseconds per stage: ``detect_track``, ``undistort``, ``window``, ``solve``, ``total``.
     window_fill : int
@@ -380,8 +384,11 @@ class Pipeline:
             omega = np.asarray(res.angular_velocities, dtype=float).reshape(-1, 3) / interval
             cov = np.asarray(res.angular_covariances, dtype=float).reshape(-1, 3, 3)
             cov = cov / interval ** 2
+            lab = np.asarray(res.labels).astype(np.int64)
+            support = np.bincount(lab[lab >= 0], minlength=len(omega))[:len(omega)]
             valid = (np.all(np.isfinite(omega), axis=1)
-                     & np.all(np.isfinite(cov.reshape(len(cov), -1)), axis=1))
+                     & np.all(np.isfinite(cov.reshape(len(cov), -1)), axis=1)
+                     & (support >= MIN_BODY_TRACKS))
             tracks = np.asarray(win_tracks, dtype=float)
             with np.errstate(invalid='ignore'):
                 mid = np.nanmean(0.5 * (tracks[..., :2] + tracks[..., 2:]), axis=1)

@@ -37,6 +37,7 @@ from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile,
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from test_pipeline import small_sequence
 
+from mlofc_ros import pipeline as pipeline_module
 from mlofc_ros.image import gray_to_image_fields, image_msg_to_gray
 from mlofc_ros.node import MlofcNode
 from mlofc_ros.ros_messages import parse_segments_msg, parse_twist_msg, stamp_to_seconds
@@ -490,3 +491,55 @@ def test_scenes_the_model_cannot_explain_give_unassigned_labels_and_no_twists(ha
     time.sleep(0.3)
     assert not any(twists.values()), {i: len(b) for i, b in twists.items()}
     h.accounting()
+
+
+def rolled(image: np.ndarray, k: int, deg_per_frame: float) -> np.ndarray:
+    """``image`` rotated about its centre by ``k * deg_per_frame``: the camera rolls."""
+    h, w = image.shape
+    m = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), k * deg_per_frame, 1.0)
+    return cv2.warpAffine(image, m, (w, h), borderMode=cv2.BORDER_REFLECT)
+
+
+def test_more_bodies_asked_than_moving_twists_are_true_or_withheld(harness):
+    seq = small_sequence()
+    h = harness('/rob_many', warn_period=0.0, focal_length=float(seq.camera.fx),
+                num_bodies=4, label_memory=0)
+    twists = h.twists(4)
+    # everything moves alike (the camera rolls 1 deg per frame): 4 bodies asked, 1 motion
+    roll = np.array([0.0, 0.0, -math.radians(30.0)])          # rad/s at 30 fps
+    t = 20.0
+    for k in range(6):
+        h.frame(image_msg(rolled(seq.frames[0], k, 1.0), t + k / 30))
+    # one box and the wall, 4 bodies asked
+    t = 40.0
+    for k in range(6):
+        h.frame(image_msg(seq.frames[k], t + k / 30))
+    h.accounting()
+    time.sleep(0.5)
+    got = [(stamp_of(m), parse_twist_msg(m)[0]) for box in twists.values() for m in box]
+    assert any(s < 30 for s, _ in got) and any(s > 30 for s, _ in got)
+    for s, w in got:
+        truth = [roll] if s < 30 else list(seq.angular_velocities)
+        err = min(np.linalg.norm(w - x) for x in truth)
+        assert err < 0.15, (s, w, truth)
+    # not everything withheld: the moving box has its twist from the second frame on
+    box = [s for s, w in got if s > 30 and np.linalg.norm(w - seq.angular_velocities[1]) < 0.15]
+    assert len(set(box)) >= 4, got
+
+
+def test_a_body_with_too_few_tracks_gets_no_twist(monkeypatch):
+    """Pipeline rule behind the node's withheld twists: finite fits of < 4 tracks are dropped."""
+    real = pipeline_module.segment_lines
+
+    def thin_body(tracks, n, **kwargs):
+        res = real(tracks, n, **kwargs)
+        res.labels = np.where(np.arange(len(res.labels)) < 3, 1, 0)   # body 1: 3 tracks
+        res.angular_covariances = np.tile(np.eye(3) * 1e-6, (n, 1, 1))
+        return res
+    monkeypatch.setattr(pipeline_module, 'segment_lines', thin_body)
+    seq = small_sequence()
+    p = pipeline_module.Pipeline(num_bodies=2, focal_length=288.0, label_memory=0)
+    results = [p.process(seq.frames[k], seq.stamps[k]) for k in range(3)]
+    assert pipeline_module.MIN_BODY_TRACKS == 4
+    for r in results[1:]:
+        assert r.body_valid.tolist().count(True) == 1, r.body_valid
