@@ -204,6 +204,14 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     if usable < need:
         raise ValueError(f'{usable} usable tracks (present in two consecutive frames), but '
                          f'{n} bodies with method {method!r} need at least {need}')
+    if init_labels is not None:
+        init_labels = np.asarray(init_labels)
+        if init_labels.shape != (arr.shape[0],):
+            raise ValueError(f'init_labels must have shape ({arr.shape[0]},), '
+                             f'got {init_labels.shape}')
+        # ids of bodies this model does not have are unknown
+        init_labels = np.where((init_labels >= 0) & (init_labels < n), init_labels, -1)
+        init_labels = init_labels.astype(np.int64)
     rng = np.random.default_rng(seed)
     if method == 'general':
         rot = segment_lines(arr, n, intr, size, 'robust', seed=seed, init_labels=init_labels)

@@ -238,14 +238,15 @@ def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E
     slot = ki
     cov = np.zeros((n_tracks, n_slots, n_slots, 2, 2))
     cov[:, np.arange(n_slots), np.arange(n_slots)] = np.eye(2)       # missing pairs: unit
-    cov[ti, slot, slot] = np.einsum('pij,pik,pkl->pjl', E, cov0 + cov1, E)
+    Et = np.swapaxes(E, 1, 2)
+    cov[ti, slot, slot] = Et @ (cov0 + cov1) @ E
     # pairs (t, t+1) and (t+1, t+2) of the same track share frame t+1
     lookup = np.full((n_tracks, n_slots + 1), -1)
     lookup[ti, slot] = np.arange(ti.size)
     nxt = lookup[ti, slot + 1]
     has = nxt >= 0
     p, q = np.flatnonzero(has), nxt[has]
-    off = -np.einsum('pij,pik,pkl->pjl', E[p], cov1[p], E[q])
+    off = -(Et[p] @ cov1[p] @ E[q])
     cov[ti[p], slot[p], slot[q]] = off
     cov[ti[p], slot[q], slot[p]] = np.swapaxes(off, 1, 2)
     full = cov.transpose(0, 1, 3, 2, 4).reshape(n_tracks, d, d)
