@@ -102,7 +102,10 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], samples: List[Di
              f'- **Growth end - start: {last["rss"] - first["rss"]:+.1f} MB; end - after first '
              f'block: {last["rss"] - warm["rss"]:+.1f} MB** '
              f'({(last["rss"] - warm["rss"]) * 1024 / max(last["frames"] - warm["frames"], 1):.2f}'
-             ' kB/frame)', '',
+             ' kB/frame)',
+             f'- Tracks per frame (block median): {warm["tracks"]:.0f} in the first block, '
+             f'{last["tracks"]:.0f} in the last (the same frames loop, so growth means tracks '
+             'accumulate, e.g. on the static background).', '',
              '## Samples', '',
              common.markdown_table(
                  ['frames', 'RSS MB', 'peak MB', 'ms/frame median (block)',
