@@ -73,7 +73,7 @@ def read_visp_camera(path: str) -> Optional[Tuple[float, float, float, float]]:
 
 
 def real_sequences(root: str, max_frames: int) -> List[Sequence_]:
-    """The real sequences under ``root`` (``<name>/frames/*.png``), gray, 30 Hz stamps."""
+    """Load the real sequences under ``root`` (``<name>/frames/*.png``), gray, 30 Hz stamps."""
     import cv2
     out = []
     for d in sorted(glob.glob(os.path.join(root, '*', 'frames'))):
@@ -93,7 +93,7 @@ def real_sequences(root: str, max_frames: int) -> List[Sequence_]:
 
 def rendered_sequences(sizes: Sequence[Tuple[int, int]], frames: int, boxes: int,
                        seed: int) -> List[Sequence_]:
-    """Rendered boxes + background at each size (``camera_centre`` motion, noise 2)."""
+    """Render boxes + background at each size (``camera_centre`` motion, noise 2)."""
     from mlofc_ros.render import render_sequence
     out = []
     for w, h in sizes:
@@ -106,7 +106,7 @@ def rendered_sequences(sizes: Sequence[Tuple[int, int]], frames: int, boxes: int
 
 
 def image_message(img: np.ndarray, encoding: str) -> SimpleNamespace:
-    """A ``sensor_msgs/Image``-like object (fields only) holding ``img`` as ``encoding``."""
+    """Build a ``sensor_msgs/Image``-like object (fields only) holding ``img`` as ``encoding``."""
     from mlofc_ros.image import gray_to_image_fields
     fields = gray_to_image_fields(img, encoding)
     fields['data'] = bytes(fields['data'])

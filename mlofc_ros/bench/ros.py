@@ -141,7 +141,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def read_stats(path: pathlib.Path) -> Optional[Dict[str, Any]]:
-    """The node's last stats dump, or None before the first one."""
+    """Return the node's last stats dump, or None before the first one."""
     try:
         return json.loads(path.read_text())
     except (OSError, ValueError):
