@@ -30,11 +30,12 @@ import cv2
 import numpy as np
 
 from mlofc_ros.bench import common
+from mlofc_ros.bench.data import shared_data_dir
 from mlofc_ros.segments.detect import LineDetector
 from mlofc_ros.tracks.tracker import LineTracker
 
 #: Real sequences (no ground truth), see ``/work/shared/data/real/README.md``.
-REAL_DIR = os.environ.get('MLOFC_REAL_DIR', '/work/shared/data/real')
+REAL_DIR = os.environ.get('MLOFC_REAL_DIR', str(shared_data_dir() / 'real'))
 REAL_SEQUENCES = ('visp_cube', 'rubik_cube', 'hamburg_taxi')
 
 

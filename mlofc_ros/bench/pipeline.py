@@ -43,8 +43,9 @@ import numpy as np
 
 # importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
 from mlofc_ros.bench import common
+from mlofc_ros.bench.data import shared_data_dir
 
-REAL_DIR = os.environ.get('MLOFC_REAL_DIR', '/work/shared/data/real')
+REAL_DIR = os.environ.get('MLOFC_REAL_DIR', str(shared_data_dir() / 'real'))
 
 #: Reported stages: (column key, label). ``other`` = undistort + window + pipeline bookkeeping.
 STAGES = (('decode', 'decode mono8'), ('detect_track', 'detect/track'), ('other', 'other'),
