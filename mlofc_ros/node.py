@@ -83,9 +83,13 @@ DIAGNOSTICS_PERIOD = 1.0
 PROBLEM_HOLD = 5.0
 
 
+#: Most kinds of problem remembered for throttling (a flood of new kinds restarts the table).
+MAX_PROBLEM_KINDS = 256
+
+
 def problem_kind(text: str) -> str:
-    """Return ``text`` with its numbers blanked: the kind of a problem, for throttling."""
-    return re.sub(r'\d+', '#', text)
+    """Return ``text`` with numbers and quoted values blanked: the kind of a problem."""
+    return re.sub(r"'[^']*'|\"[^\"]*\"|\d+", '#', text)
 
 
 def parameter_descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
@@ -252,6 +256,8 @@ class MlofcNode(Node):
         now = time.monotonic()
         self._note_problem(text)
         key = f'{key}:{problem_kind(text)}'
+        if len(self._last_warn) > MAX_PROBLEM_KINDS:
+            self._last_warn.clear()
         if now - self._last_warn.get(key, -1e300) >= self._values['warn_period']:
             self._last_warn[key] = now
             self.get_logger().warning(text)

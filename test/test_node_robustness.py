@@ -252,9 +252,11 @@ def test_bad_images_are_skipped_with_one_warning_per_kind_and_the_node_goes_on(h
     with pytest.raises(ValueError, match='max_pixels'):
         image_msg_to_gray(bad_images(seq.frames[0])[5][1], max_pixels=h.mlofc._values[
             'max_pixels'])
-    # the same problem again within warn_period: skipped, counted, not warned again
-    for _ in range(3):
-        h.skipped(bad_images(seq.frames[0])[0][1])
+    # the same kind of problem again within warn_period: skipped, counted, not warned again
+    for encoding in ('jpeg', 'png', 'x' * 40):
+        msg = bad_images(seq.frames[0])[0][1]
+        msg.encoding = encoding
+        h.skipped(msg)
     time.sleep(0.3)
     assert len(h.warnings('unsupported image encoding')) == 1
     # a blank frame: an EMPTY cloud with its stamp, a warning, no twist
