@@ -30,7 +30,7 @@ from collections import deque
 from dataclasses import dataclass, field
 import math
 import time
-from typing import Any, Deque, Dict, Optional, Tuple
+from typing import Any, Deque, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -49,6 +49,8 @@ BLANK_CONTRAST = 2
 #: A body is reported (``body_valid``) only with at least this many tracks in the window: with
 #: fewer (num_bodies above what the scene holds) its fitted motion is mostly noise.
 MIN_BODY_TRACKS = 4
+#: With no calibration, the focal length is fixed to the median of this many window estimates.
+FOCAL_SAMPLES = 8
 
 
 @dataclass
@@ -165,6 +167,11 @@ class Pipeline:
         self._last_stamp: Optional[float] = None
         self._image_size: Optional[Tuple[int, int]] = None
         self._undistort_camera: Optional[CameraModel] = None
+        # focal length estimated from the stream when no calibration is given: a camera
+        # constant, so it is fixed once FOCAL_SAMPLES windows agree (the median) instead of
+        # being re-estimated at every frame (100x the cost of a known-f solve)
+        self._focal_samples: List[float] = []
+        self._focal_fixed: Optional[float] = None
 
     # --- configuration -------------------------------------------------------------------
 
@@ -202,6 +209,11 @@ class Pipeline:
         self._intervals.clear()
         self._last_stamp = None
         self._image_size = None
+        self._forget_focal()
+
+    def _forget_focal(self) -> None:
+        self._focal_samples.clear()
+        self._focal_fixed = None
 
     def _restart_window(self) -> None:
         self._window.reset()
@@ -246,7 +258,10 @@ class Pipeline:
         if f > 0:
             return (f, f, size[0] / 2.0, size[1] / 2.0), None
         if camera is None:
-            return None, None
+            if self._focal_fixed is None:
+                return None, None
+            f = self._focal_fixed
+            return (f, f, size[0] / 2.0, size[1] / 2.0), None
         return camera.intrinsics, (camera if camera.has_distortion else None)
 
     def _empty(self, stamp: float, problem: Optional[str], skipped: bool = False
@@ -290,6 +305,7 @@ class Pipeline:
                             f'{self._image_size[1]} to {size[0]}x{size[1]}; tracks restarted')
             self._restart_tracks()
             self._intervals.clear()
+            self._forget_focal()
         self._image_size = size
 
         if self._last_stamp is not None:
@@ -408,6 +424,10 @@ class Pipeline:
             residuals = _lookup(track_ids, win_ids,
                                 np.asarray(res.residuals, dtype=np.float32), np.nan)
             focal = float(res.focal_length)
+            if intrinsics is None and math.isfinite(focal) and focal > 0:
+                self._focal_samples.append(focal)
+                if len(self._focal_samples) >= FOCAL_SAMPLES:
+                    self._focal_fixed = float(np.median(self._focal_samples))
         else:
             w_out, c_out, v_out = _invalid_bodies(self.n_bodies)
         timings['total'] = (time.perf_counter() - t0) * 1e3

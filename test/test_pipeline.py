@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from mlofc_ros.bodies import assign, BodyTracker, relabel
-from mlofc_ros.pipeline import FrameResult, Pipeline, TIMING_KEYS
+from mlofc_ros.pipeline import FOCAL_SAMPLES, FrameResult, Pipeline, TIMING_KEYS
 from mlofc_ros.render import render_sequence
 
 #: The accuracy goal on the two-box sequence once the window is full.
@@ -431,3 +431,18 @@ def test_pipeline_keeps_body_ids_over_a_sequence():
     ids = [int(np.argmin(np.linalg.norm(r.angular_velocities - w_true[moving], axis=1)))
            for r in results[2:]]
     assert len(set(ids)) == 1, ids
+
+
+def test_estimated_focal_length_is_fixed_after_warm_up():
+    """Without calibration f is a camera constant: estimated over a few windows, then held."""
+    seq = render_sequence(n_boxes=2, n_frames=22, size=(320, 240), motion='camera_centre',
+                          background=True, noise_sigma=1.0, seed=3)
+    p = Pipeline(num_bodies=3, window=4)
+    out = run(p, seq, camera=None)
+    focal = [r.focal_length for r in out if math.isfinite(r.focal_length)]
+    assert len(focal) >= FOCAL_SAMPLES + 2
+    held = focal[-1]
+    assert focal[-2] == held                        # fixed: no longer re-estimated
+    assert abs(held - seq.camera.fx) / seq.camera.fx < 0.1
+    p.reset()
+    assert p._intrinsics(None, (320, 240)) == (None, None)      # forgotten on reset
