@@ -58,6 +58,14 @@ class Sequence_(SimpleNamespace):
     """A named list of gray frames, their stamps (s), a camera or None, and num_bodies."""
 
 
+def code_revisions() -> str:
+    """Last commits (``+dirty`` if edited) of the code this benchmark runs, for the report."""
+    return ', '.join(f'{name} {common.git_revision(path)}' for name, path in (
+        ('pipeline', 'mlofc_ros/pipeline.py'), ('solver', 'mlofc_ros/solver'),
+        ('tracks', 'mlofc_ros/tracks'), ('detect', 'mlofc_ros/segments'),
+        ('node', 'mlofc_ros/node.py')))
+
+
 def read_visp_camera(path: str) -> Optional[Tuple[float, float, float, float]]:
     """``(fx, fy, cx, cy)`` px from a ViSP ``<camera>`` block (``px, py, u0, v0``), else None."""
     try:
@@ -252,10 +260,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
         {'Threads': 'single (`cv2.setNumThreads(1)`, one BLAS thread); the machine is shared, '
                     'so compare ratios to the LSD reference measured in the same run on the '
                     'same frames, not absolute ms across runs',
-         'Code': f'pipeline {common.git_revision("mlofc_ros/pipeline.py")}, solver '
-                 f'{common.git_revision("mlofc_ros/solver")}, tracks '
-                 f'{common.git_revision("mlofc_ros/tracks")}, detect '
-                 f'{common.git_revision("mlofc_ros/segments")}',
+         'Code (at start)': args.code,
          'Wall time': f'{wall:.0f} s',
          'Load average (1 min) at start / end': f'{args.load:.1f} / {os.getloadavg()[0]:.1f}'})
     names = [s.name for s in seqs]
@@ -329,6 +334,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     argv = list(argv or [])
     args = parse_args(argv)
     args.load = os.getloadavg()[0]
+    args.code = code_revisions()
     import cv2
     cv2.setNumThreads(1)
     from mlofc_ros import params

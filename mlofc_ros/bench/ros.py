@@ -258,6 +258,8 @@ def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
     from mlofc_ros.render import render_sequence
 
     load = os.getloadavg()
+    from mlofc_ros.bench.pipeline import code_revisions
+    code = code_revisions()
     domain = args.domain_id if args.domain_id is not None else fresh_domain_id()
     common.eprint(f'ros: rendering {args.frames} frames {args.wh[0]}x{args.wh[1]}')
     seq = render_sequence(args.boxes, min(args.frames, 120), size=args.wh,
@@ -300,7 +302,7 @@ def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
                 common.eprint(f'ros: {rate:g} Hz: {r["answered"]}/{r["published"]} answered, '
                               f'{r["dropped"]} dropped, latency median {r["lat_median"]:.0f} '
                               f'ms, p99 {r["lat_p99"]:.0f} ms')
-        return {'rows': rows, 'domain': domain, 'startup': startup, 'load': load,
+        return {'rows': rows, 'domain': domain, 'startup': startup, 'load': load, 'code': code,
                 'command': command, 'seq': seq}
     finally:
         if bench is not None:
@@ -399,9 +401,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
          'Input': f'{args.wh[0]}x{args.wh[1]} rendered boxes + background, mono8, '
                   f'{args.frames} frames per rate, sensor-data QoS, CameraInfo before each '
                   'image; 4 warm-up frames at 2 Hz not counted',
-         'Code': f'node {common.git_revision("mlofc_ros/node.py")}, pipeline '
-                 f'{common.git_revision("mlofc_ros/pipeline.py")}, solver '
-                 f'{common.git_revision("mlofc_ros/solver")}',
+         'Code (at start)': res['code'],
          'Wall time': f'{wall:.0f} s on a shared 2-core machine (bench and node compete for it)',
          'Load average (1 min) at start / end':
              f'{res["load"][0]:.1f} / {os.getloadavg()[0]:.1f}'})

@@ -82,9 +82,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], samples: List[Di
                   f'{args.loop} rendered frames looped (stamps monotonic, 1/30 s apart)',
          'Pipeline': f'`Pipeline(num_bodies={args.boxes + 1})`, other parameters default; '
                      'single thread (cv2.setNumThreads(1), one BLAS thread)',
-         'Code': f'pipeline {common.git_revision("mlofc_ros/pipeline.py")}, solver '
-                 f'{common.git_revision("mlofc_ros/solver")}, tracks '
-                 f'{common.git_revision("mlofc_ros/tracks")}',
+         'Code (at start)': args.code,
          'Load average (1 min) at start / now': f'{args.load:.1f} / {os.getloadavg()[0]:.1f}'})
     first, last = samples[0], samples[-1]
     warm = samples[1] if len(samples) > 1 else first
@@ -122,6 +120,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     argv = list(argv or [])
     args = parse_args(argv)
     args.load = os.getloadavg()[0]
+    from mlofc_ros.bench.pipeline import code_revisions
+    args.code = code_revisions()
     import cv2
     cv2.setNumThreads(1)
     from mlofc_ros.pipeline import Pipeline
