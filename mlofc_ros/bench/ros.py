@@ -428,7 +428,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
               'limit: above it the node drops the stalest queued frames).',
               f'- Inside the node `Pipeline.process` took {wall_med:.0f} ms wall but '
               f'{cpu_med:.0f} ms of worker-thread CPU (medians over the rates): the node waited '
-              'for a core most of the time on this shared machine. Were it alone on a core, '
+              f'for a core (or the GIL) {"most" if wall_med > 2 * cpu_med else "part"} of the '
+              'time on this shared machine. Were it alone on a core, '
               f'the CPU time alone would allow about {1e3 / cpu_med:.0f} Hz (an estimate, not '
               'measured here).', '',
               '## Per rate', '',
@@ -451,7 +452,9 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
               'queue, decode, `Pipeline.process`, packing and DDS both ways.',
               '- process wall / CPU ms: median over the rate of `Pipeline.process` inside the '
               "node, wall time and the worker thread's CPU time (`time.thread_time`); wall "
-              'well above CPU means the node waited for a core (shared machine) or the GIL.', '',
+              'well above CPU means the node waited for a core (shared machine) or the GIL. '
+              'When the node drops most frames, the frames it does process are farther apart: '
+              'larger motion between them makes tracking and solving costlier per frame.', '',
               '![drops and latency](ros.png)', '']
     return '\n'.join(lines)
 
