@@ -343,7 +343,9 @@ def run_tasks(tasks: Sequence[Task], jobs: int) -> Tuple[Raw, Dict[str, List[str
     t0 = time.perf_counter()
     results = []
     if jobs > 1 and len(order) >= 4 * jobs:
-        ctx = multiprocessing.get_context('fork' if os.name == 'posix' else 'spawn')
+        # forkserver, not fork: a process that has run rclpy (the test suite) holds DDS threads,
+        # and a forked child can deadlock on a lock one of them held
+        ctx = multiprocessing.get_context('forkserver' if os.name == 'posix' else 'spawn')
         with ctx.Pool(jobs) as pool:
             for i, res in enumerate(pool.imap_unordered(run_task, order, chunksize=2)):
                 results.append(res)

@@ -542,7 +542,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     t0 = time.perf_counter()
     results = []
     if args.jobs > 1:
-        ctx = multiprocessing.get_context('fork' if os.name == 'posix' else 'spawn')
+        # forkserver, not fork: a process that has run rclpy (the test suite) holds DDS threads,
+        # and a forked child can deadlock on a lock one of them held
+        ctx = multiprocessing.get_context('forkserver' if os.name == 'posix' else 'spawn')
         with ctx.Pool(args.jobs) as pool:
             for i, res in enumerate(pool.imap_unordered(run_unit, units, chunksize=2)):
                 results.append(res)
