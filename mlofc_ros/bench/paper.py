@@ -448,8 +448,8 @@ HOW_TO_READ = """\
 
 def build_report(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
                  errors: Dict[str, List[str]], methods: Sequence[str], args: argparse.Namespace,
-                 command: str, seconds: float) -> str:
-    """Whole Markdown report."""
+                 command: str, seconds: float, revision: str = 'unknown') -> str:
+    """Whole Markdown report; ``revision`` names the solver code the run imported."""
     cpu = sum(s['cpu_total'] for s in stats.values())
     extra = {'Trials per point': str(args.trials), 'Methods': ', '.join(methods),
              f'Methods on the {args.frames}-view scenes': ', '.join(
@@ -458,7 +458,7 @@ def build_report(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
                          f'{cpu:.0f} s CPU in the solver calls (the wall time depends on what '
                          f'else the machine runs; CPU / workers is the uncontended estimate)',
              'Base seed': str(args.seed),
-             'Solver revision': common.git_revision('mlofc_ros/solver')}
+             'Solver revision (at the start of the run)': revision}
     parts = [common.run_header('Paper experiments (section 4.1, Fig. 2-5)', command, extra)]
     head = headline(exps, stats, methods, args.frames, args.multi)
     if head:
@@ -520,6 +520,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the benchmark; returns the process exit code."""
     argv = list(argv or [])
     args = parse_args(argv)
+    revision = common.git_revision('mlofc_ros/solver')  # the code imported next
     from mlofc_ros.solver import METHODS
 
     methods = list(METHODS) if args.methods is None else [
@@ -556,7 +557,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     seconds = time.perf_counter() - t0
     stats, errors = aggregate(results)
     command = common.command_line('paper', argv)
-    report = build_report(exps, stats, errors, methods, args, command, seconds)
+    report = build_report(exps, stats, errors, methods, args, command, seconds, revision)
     (out_dir / 'paper.md').write_text(report)
     for exp in exps:
         plot_experiment(exp, stats, methods, args.frames, out_dir / f'paper_{exp.key}.png',
