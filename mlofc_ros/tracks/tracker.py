@@ -165,17 +165,6 @@ def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 12, radius
     fx, fy = np.where(flip, -fx, fx), np.where(flip, -fy, fy)
     ta = (x1 - cx) * fx + (y1 - cy) * fy
     tb = (x2 - cx) * fx + (y2 - cy) * fy
-    # the prediction's extent may overhang where the edge ended (a face turning, an
-    # occluder): shrink it to the first and last samples that found the edge, plus half a
-    # sample spacing (the edge may end anywhere up to the next sample); never grow it
-    has = w > 0
-    first = np.where(has.any(axis=1), np.argmax(has, axis=1), 0)
-    last = np.where(has.any(axis=1), n_samples - 1 - np.argmax(has[:, ::-1], axis=1),
-                    n_samples - 1)
-    half_step = 0.5 / n_samples
-    lo = np.clip(t[first] - half_step, 0.0, 1.0)
-    hi = np.clip(t[last] + half_step, 0.0, 1.0)
-    ta, tb = ta + lo * (tb - ta), ta + hi * (tb - ta)
     out = np.stack([cx + ta * fx, cy + ta * fy, cx + tb * fx, cy + tb * fy], axis=1)
     return out, support, rms
 
