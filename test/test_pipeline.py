@@ -446,3 +446,20 @@ def test_estimated_focal_length_is_fixed_after_warm_up():
     assert abs(held - seq.camera.fx) / seq.camera.fx < 0.1
     p.reset()
     assert p._intrinsics(None, (320, 240)) == (None, None)      # forgotten on reset
+
+
+def test_labels_are_stable_over_time():
+    """Goal: < 1% of segment-frames change label on a steady sequence once the window is full."""
+    seq = two_box_sequence(20)
+    p = Pipeline(num_bodies=3, window=5)
+    last, changes, total = {}, 0, 0
+    for f, r in enumerate(run(p, seq)):
+        now = dict(zip(r.track_ids.tolist(), r.labels.tolist()))
+        if f >= 5:
+            for tid, lab in now.items():
+                if last.get(tid, -1) >= 0 and lab >= 0:
+                    total += 1
+                    changes += last[tid] != lab
+        last = now
+    assert total > 500
+    assert changes / total < 0.01
