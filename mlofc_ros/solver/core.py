@@ -30,6 +30,10 @@ from .robust import noise_sigma, robust_segmentation
 #: Methods accepted by :func:`segment_lines`.
 METHODS = ('algebraic', 'kmeans', 'algebraic+kmeans', 'robust', 'general')
 
+#: Plausible focal lengths, in units of the larger image side (fields of view ~7-170 deg);
+#: an estimate outside is replaced by a scan over this range.
+FOCAL_RANGE = (0.25, 8.0)
+
 #: Random restarts of the paper's K-means from a random labelling (the best is kept).
 KMEANS_RESTARTS = 10
 
@@ -227,6 +231,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     centre = (w / 2.0, h / 2.0)
     f0 = first_order_focal(arr, n, size)
     info = {'focal_first_order': f0}
+    if f0 is not None and not FOCAL_RANGE[0] <= f0 / max(w, h) <= FOCAL_RANGE[1]:
+        f0 = None                  # implausible (a field of view over 170 or under 7 deg)
     if f0 is None:
         # eq. (18) undetermined (e.g. sum of w1 and w2 over bodies ~ 0): scan a wide range and
         # keep the focal length whose known-f solution explains the tracks best
