@@ -58,7 +58,7 @@ def _check_tracks(tracks) -> np.ndarray:
     return arr
 
 
-def _check_intrinsics(intrinsics, image_size, tracks: np.ndarray
+def _check_intrinsics(intrinsics, image_size
                       ) -> Tuple[Optional[Tuple[float, float, float, float]], Tuple[float, float]]:
     if intrinsics is not None:
         vals = np.asarray(intrinsics, dtype=float).ravel()
@@ -198,7 +198,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     if n < 0:
         raise ValueError(f'n_bodies must be >= 0 (0 = automatic), got {n}')
     arr = _check_tracks(tracks)
-    intr, size = _check_intrinsics(intrinsics, image_size, arr)
+    intr, size = _check_intrinsics(intrinsics, image_size)
     if n == 0:
         from .model_selection import select_bodies
         return select_bodies(arr, intr, size, method, seed=seed)
@@ -313,7 +313,7 @@ def assign_with_motions(tracks, angular_velocities, intrinsics: Sequence[float],
     cost. No method can beat this on the same data with the same residual.
     """
     arr = _check_tracks(tracks)
-    intr, _ = _check_intrinsics(intrinsics, None, arr)
+    intr, _ = _check_intrinsics(intrinsics, None)
     if intr is None:
         raise ValueError('assign_with_motions needs intrinsics')
     w = np.atleast_2d(np.asarray(angular_velocities, dtype=float))

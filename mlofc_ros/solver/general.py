@@ -30,7 +30,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from .lines import interpretation_normals, orthonormal_pair, rotation_matrix
+from .lines import first_midpoints, interpretation_normals, orthonormal_pair, rotation_matrix
 
 Intrinsics = Tuple[float, float, float, float]
 
@@ -224,10 +224,7 @@ def general_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray) -> np.nda
 def spatial_labels(tracks: np.ndarray, n: int, rng: np.random.Generator,
                    iterations: int = 10) -> np.ndarray:
     """K-means of the track midpoints (px): lines near each other tend to share a body."""
-    ok = np.isfinite(tracks[..., 0])
-    first = np.argmax(ok, axis=1)
-    seg = tracks[np.arange(tracks.shape[0]), first]
-    mid = 0.5 * (seg[:, :2] + seg[:, 2:])
+    mid = first_midpoints(tracks)
     centres = mid[rng.choice(mid.shape[0], n, replace=False)]
     labels = np.zeros(mid.shape[0], dtype=np.int64)
     for _ in range(iterations):

@@ -184,12 +184,6 @@ class LineFlows:
         """``(N,)`` number of frame pairs of every track."""
         return np.bincount(self.pair_track, minlength=self.n_tracks)
 
-    def subset(self, keep: np.ndarray) -> 'LineFlows':
-        """Flows of the pairs selected by a boolean or index array (track indices unchanged)."""
-        return LineFlows(self.n_tracks, self.pair_track[keep], self.m0[keep], self.m1[keep],
-                         self.cov0[keep], self.cov1[keep], self.E[keep], self.M[keep],
-                         self.b[keep], self.Mw[keep], self.bw[keep])
-
     @property
     def whitened_rows(self) -> np.ndarray:
         """``(P, 2, 4)`` rows whose residuals are independent with unit variance (1 px)."""
@@ -259,31 +253,8 @@ def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E
     return white[..., :3], white[..., 3]
 
 
-def residual_covariance(flows: LineFlows, c: np.ndarray) -> np.ndarray:
-    """Covariance ``(P, n, 2, 2)`` of ``r = E^T((I + [c]x/2) m - (I - [c]x/2) m')`` per body.
-
-    ``c`` is ``(n, 3)`` (a few bodies); for 1 px endpoint noise. The residual's derivative with
-    respect to ``E`` vanishes at the solution, so ``E`` is treated as fixed.
-    """
-    c = np.atleast_2d(c)
-    Et = np.swapaxes(flows.E, -1, -2)                      # (P, 2, 3)
-    out = np.empty((flows.n_pairs, c.shape[0], 2, 2))
-    for i, half in enumerate(0.5 * skew(c)):               # loop over bodies, not lines
-        ea = Et + Et @ half                                # E^T (I + [c]x/2)
-        eb = Et - Et @ half
-        out[:, i] = (ea @ flows.cov0 @ np.swapaxes(ea, -1, -2)
-                     + eb @ flows.cov1 @ np.swapaxes(eb, -1, -2))
-    return out
-
-
-def inv2(s: np.ndarray) -> np.ndarray:
-    """Inverse of 2x2 matrices ``(..., 2, 2)`` (closed form, regularised when singular)."""
-    det = s[..., 0, 0] * s[..., 1, 1] - s[..., 0, 1] * s[..., 1, 0]
-    tiny = 1e-30 + 1e-12 * (s[..., 0, 0] * s[..., 1, 1])
-    det = np.where(np.abs(det) < tiny, tiny, det)
-    out = np.empty_like(s)
-    out[..., 0, 0] = s[..., 1, 1] / det
-    out[..., 1, 1] = s[..., 0, 0] / det
-    out[..., 0, 1] = -s[..., 0, 1] / det
-    out[..., 1, 0] = -s[..., 1, 0] / det
-    return out
+def first_midpoints(tracks: np.ndarray) -> np.ndarray:
+    """Midpoint ``(N, 2)`` (px) of every track's first present segment."""
+    ok = np.isfinite(tracks[..., 0])
+    seg = tracks[np.arange(tracks.shape[0]), np.argmax(ok, axis=1)]
+    return 0.5 * (seg[:, :2] + seg[:, 2:])

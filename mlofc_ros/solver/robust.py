@@ -29,7 +29,7 @@ import numpy as np
 
 from .gpca import algebraic_normals
 from .ksubspaces import assign, ksubspaces, total_cost
-from .lines import LineFlows
+from .lines import first_midpoints, LineFlows
 from .models import (chi2_quantile, fit_bodies, quad_costs, solve_normal_equations,
                      track_costs, track_stats, TrackStats)
 
@@ -50,14 +50,6 @@ def noise_sigma(costs: np.ndarray, labels: np.ndarray, dof: np.ndarray,
         return 1.0
     best = costs[np.flatnonzero(ok), labels[ok]] / chi2_quantile(0.5, dof[ok])
     return float(max(np.sqrt(np.median(best)), floor))
-
-
-def _midpoints(tracks: np.ndarray) -> np.ndarray:
-    """First present segment midpoint of every track ``(N, 2)`` (px)."""
-    ok = np.isfinite(tracks[..., 0])
-    first = np.argmax(ok, axis=1)
-    seg = tracks[np.arange(tracks.shape[0]), first]
-    return 0.5 * (seg[:, :2] + seg[:, 2:])
 
 
 def _sample_pairs(rng: np.random.Generator, pool: np.ndarray, mid: np.ndarray,
@@ -86,7 +78,7 @@ def sequential_msac(stats: TrackStats, tracks: np.ndarray, n: int, dof: np.ndarr
     largest remaining body), so no noise level is needed up front; the noise is then estimated
     from the first, largest body and sets the chi-square inlier bound.
     """
-    mid = _midpoints(tracks)
+    mid = first_midpoints(tracks)
     labels = np.full(stats.A.shape[0], -1, dtype=np.int64)
     pool = np.flatnonzero(stats.usable)
     sigma2 = None
