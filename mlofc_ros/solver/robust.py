@@ -32,6 +32,7 @@ from .ksubspaces import assign, ksubspaces, total_cost
 from .lines import first_midpoints, LineFlows
 from .models import (chi2_quantile, fit_bodies, quad_costs, solve_normal_equations,
                      track_costs, track_stats, TrackStats)
+from .spatial import smooth_labels, spatial_neighbours
 
 #: A warm start is accepted alone when it leaves at least this share of the tracks as inliers
 #: (tracker noise is heavier-tailed than Gaussian: 78-88% measured on rendered windows).
@@ -121,7 +122,7 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
                                    trim_dof=dof)
         counts = np.bincount(lab[lab >= 0], minlength=n)
         if np.all(counts >= 2) and np.mean(lab[stats.usable] >= 0) >= WARM_INLIERS:
-            return _final_pass(flows, lab, c, dof, sigma, 'previous', {})
+            return _final_pass(flows, tracks, lab, c, dof, sigma, 'previous', {})
     starts = []
     if init_labels is not None:
         starts.append(('previous', np.asarray(init_labels, dtype=np.int64)))
@@ -148,25 +149,29 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
     cap = chi2_quantile(OUTLIER_P, dof) * sigma ** 2
     scores = [total_cost(costs, lab, cap) for _, lab, _, costs in refined]
     name, lab, c, _ = refined[int(np.argmin(scores))]
-    return _final_pass(flows, lab, c, dof, sigma, name,
+    return _final_pass(flows, tracks, lab, c, dof, sigma, name,
                        dict(zip([r[0] for r in refined], scores)))
 
 
-def _final_pass(flows: LineFlows, lab: np.ndarray, c: np.ndarray, dof: np.ndarray,
-                sigma: Optional[float], name: str, scores: dict
+def _final_pass(flows: LineFlows, tracks: np.ndarray, lab: np.ndarray, c: np.ndarray,
+                dof: np.ndarray, sigma: Optional[float], name: str, scores: dict
                 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-    """Exact costs, noise, outlier rejection and refit: outliers move no body."""
+    """Exact costs, noise, outlier rejection, spatial smoothing, refit: outliers move no body."""
     n = c.shape[0]
     if sigma is None:
         sigma = noise_sigma(track_costs(flows, c, weighted=True), lab, dof)
     cap = chi2_quantile(OUTLIER_P, dof) * sigma ** 2
+    neighbours = spatial_neighbours(first_midpoints(tracks))
+    coupling = 0.0
     for _ in range(3):
         costs = track_costs(flows, c, weighted=True)
-        new = assign(costs, cap)
+        # outliers are decided by the costs alone; the neighbours only choose among bodies
+        new, coupling = smooth_labels(costs, assign(costs, cap), neighbours)
         c, _ = fit_bodies(flows, new, n)
         if np.array_equal(new, lab):
             break
         lab = new
     costs = track_costs(flows, c, weighted=True)
-    info = {'sigma_px': sigma, 'candidate': name, 'candidate_costs': scores}
+    info = {'sigma_px': sigma, 'candidate': name, 'candidate_costs': scores,
+            'potts_coupling': coupling}
     return lab, c, costs, info

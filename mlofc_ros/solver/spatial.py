@@ -1,0 +1,145 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Spatial coherence: lines near each other in the image tend to share a body.
+
+Real rigid bodies are compact in the image, so a track's image neighbours are evidence for its
+label, which matters where the rotation-only model is only approximately right (bodies that
+also translate). :func:`smooth_labels` adds a Potts term (a penalty per neighbour with another
+label) to the per-track costs and minimises it by iterated conditional modes. The coupling is
+estimated from the labelling itself: when labels are spatially mixed (the paper's synthetic
+scenes of intermixed random lines) it is zero and nothing changes.
+"""
+from typing import Tuple
+
+import numpy as np
+
+#: Potts weight per disagreeing neighbour, as a share of the median inlier cost, at full
+#: coherence (measured on Hopkins155 line tracks: 0.25-1 gain 1-5 points, 2 starts to lose).
+POTTS_WEIGHT = 0.5
+#: Neighbours per track.
+NEIGHBOURS = 6
+
+
+#: Up to this many points the neighbours are exact (brute force, one (N, N) distance matrix).
+EXACT_MAX = 600
+
+
+def _morton(q: np.ndarray) -> np.ndarray:
+    """Z-order codes ``(N,)`` of non-negative integer coordinates ``q (N, 2)`` < 2**16."""
+    v = q.astype(np.uint64)
+    for shift, mask in ((8, 0x00FF00FF), (4, 0x0F0F0F0F), (2, 0x33333333), (1, 0x55555555)):
+        v = (v | (v << np.uint64(shift))) & np.uint64(mask)
+    return v[:, 0] | (v[:, 1] << np.uint64(1))
+
+
+def spatial_neighbours(points: np.ndarray, k: int = NEIGHBOURS, window: int = 16
+                       ) -> np.ndarray:
+    """``k`` nearest neighbours ``(N, k)`` of ``points (N, 2)`` (px), never the point itself.
+
+    Exact up to :data:`EXACT_MAX` points. Beyond, approximate and linear in N: the candidates
+    are the ``window`` points on either side along two shifted Z-order curves (recall of the
+    true 6 nearest ~0.97 on uniform and clustered points); a smoothness prior needs near
+    neighbours, not exactly the nearest ones. Deterministic. ``-1`` pads when N <= k.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    n = pts.shape[0]
+    k = min(k, n - 1)
+    if k <= 0:
+        return np.full((n, 0), -1, dtype=np.int64)
+    if n <= EXACT_MAX:
+        sq = np.sum(pts * pts, axis=1)
+        d = sq[:, None] + sq[None, :] - 2.0 * pts @ pts.T
+        np.fill_diagonal(d, np.inf)
+        return np.argpartition(d, k - 1, axis=1)[:, :k].astype(np.int64)
+    lo = pts.min(axis=0)
+    q = (pts - lo) * (32767.0 / max(float(np.ptp(pts, axis=0).max()), 1e-9))
+    offs = np.r_[-window:0, 1:window + 1]
+    parts = []
+    for shift in (0.0, 32767.0 / 3.0):          # a second, shifted curve covers the seams
+        order = np.argsort(_morton(q + shift), kind='stable')
+        rank = np.empty(n, dtype=np.int64)
+        rank[order] = np.arange(n)
+        parts.append(order[np.clip(rank[:, None] + offs, 0, n - 1)])
+    cand = np.concatenate(parts, axis=1)
+    d = np.sum((pts[cand] - pts[:, None, :]) ** 2, axis=2)
+    d[cand == np.arange(n)[:, None]] = np.inf
+    # a candidate found on both curves counts once
+    srt = np.argsort(cand, axis=1, kind='stable')
+    cs, ds = np.take_along_axis(cand, srt, axis=1), np.take_along_axis(d, srt, axis=1)
+    ds[:, 1:][cs[:, 1:] == cs[:, :-1]] = np.inf
+    near = np.argpartition(ds, k - 1, axis=1)[:, :k]
+    return np.take_along_axis(cs, near, axis=1)
+
+
+def label_coherence(labels: np.ndarray, neighbours: np.ndarray) -> float:
+    """Spatial coherence in [0, 1]: neighbour agreement above chance (0 = mixed, 1 = regions)."""
+    a = labels[:, None]
+    b = np.where(neighbours >= 0, labels[np.maximum(neighbours, 0)], -1)
+    both = (a >= 0) & (b >= 0)
+    if np.count_nonzero(both) == 0:
+        return 0.0
+    agree = float(np.mean((a == b)[both]))
+    p = np.bincount(labels[labels >= 0]) / max(np.count_nonzero(labels >= 0), 1)
+    chance = float(np.sum(p * p))
+    if chance >= 1.0:
+        return 0.0
+    return float(np.clip((agree - chance) / (1.0 - chance), 0.0, 1.0))
+
+
+def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
+                  weight: float = POTTS_WEIGHT, sweeps: int = 5) -> Tuple[np.ndarray, float]:
+    """Relabel the labelled tracks by costs plus a Potts term over image neighbours.
+
+    Parameters
+    ----------
+    costs : (N, n) float
+        Per-track cost under every body (nan: unusable).
+    labels : (N,) int
+        Current labels; ``-1`` (outliers, unusable) stay ``-1`` and vote for nobody.
+    neighbours : (N, k) int
+        From :func:`spatial_neighbours` (``-1`` pads).
+    weight : float
+        Penalty per disagreeing neighbour as a share of the median best cost of the labelled
+        tracks, at full coherence (scaled by :func:`label_coherence`).
+
+    Returns
+    -------
+    labels : (N,) int64
+        The smoothed labels.
+    coupling : float
+        The penalty per disagreeing neighbour that was used (cost units; 0 = unchanged).
+    """
+    lab = np.asarray(labels, dtype=np.int64).copy()
+    keep = lab >= 0
+    n = costs.shape[1]
+    if n < 2 or neighbours.shape[1] == 0 or np.count_nonzero(keep) < 2:
+        return lab, 0.0
+    data = np.where(np.isfinite(costs), costs, np.inf)
+    scale = float(np.median(np.min(data[keep], axis=1)))
+    coupling = weight * label_coherence(lab, neighbours) * scale
+    if not coupling > 0.0:
+        return lab, 0.0
+    valid = neighbours >= 0
+    nb = np.maximum(neighbours, 0)
+    bodies = np.arange(n)
+    for _ in range(sweeps):
+        nl = np.where(valid, lab[nb], -1)
+        votes = np.sum(nl[:, :, None] == bodies, axis=1)             # (N, n)
+        present = np.sum(nl >= 0, axis=1, keepdims=True)
+        new = np.argmin(data + coupling * (present - votes), axis=1)
+        new = np.where(keep, new, -1)
+        if np.array_equal(new, lab):
+            break
+        lab = new
+    return lab, coupling
