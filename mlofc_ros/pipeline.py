@@ -172,6 +172,9 @@ class Pipeline:
         # being re-estimated at every frame (100x the cost of a known-f solve)
         self._focal_samples: List[float] = []
         self._focal_fixed: Optional[float] = None
+        # method 'general': the last motion (rad/frame, unit T) of every stable body id, the
+        # warm start of the next window
+        self._motions: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}
 
     # --- configuration -------------------------------------------------------------------
 
@@ -200,12 +203,14 @@ class Pipeline:
             self._stamps = deque(maxlen=self.params['window'])
         if 'num_bodies' in changed:
             self.bodies.reset()
+            self._motions.clear()
 
     def reset(self) -> None:
         """Forget all state (tracks, window, body ids, stamps), as at construction."""
         self._tracker.reset()
         self._restart_window()
         self.bodies.reset()
+        self._motions.clear()
         self._intervals.clear()
         self._last_stamp = None
         self._image_size = None
@@ -318,6 +323,7 @@ class Pipeline:
                                 'tracks and window restarted')
                 self._restart_tracks()
                 self.bodies.reset()
+                self._motions.clear()
                 self._intervals.clear()
             else:
                 gap = float(self.params['max_frame_gap'])
@@ -381,13 +387,19 @@ class Pipeline:
         res = None
         if fill >= 2 and len(win_ids) and not blank:     # a blank frame observes no motion
             init = self.bodies.previous_labels(win_ids) if n_req > 0 else None
+            motions = None
             if init is not None:
                 init = np.where(init < n_req, init, -1)
+                if self.params['method'] == 'general' and self._motions:
+                    motions = (np.full((n_req, 3), np.nan), np.full((n_req, 3), np.nan))
+                    for body, (w_b, t_b) in self._motions.items():
+                        if body < n_req:
+                            motions[0][body], motions[1][body] = w_b, t_b
             try:
                 res = segment_lines(np.asarray(win_tracks, dtype=np.float64), n_req,
                                     intrinsics=intrinsics, image_size=size,
                                     method=self.params['method'], seed=int(self.params['seed']),
-                                    init_labels=init)
+                                    init_labels=init, init_motions=motions)
             except (ValueError, NotImplementedError) as exc:
                 problems.append(f'solver: {exc}')
             except Exception as exc:  # noqa: B902 (a solver failure must not lose the frame)
@@ -414,6 +426,11 @@ class Pipeline:
             w_out[mapping] = omega
             c_out[mapping] = cov
             v_out[mapping] = valid
+            t_dirs = res.info.get('translation_directions')
+            if t_dirs is not None:
+                for j in np.flatnonzero(valid):                  # bodies, not lines
+                    self._motions[int(mapping[j])] = (np.asarray(res.angular_velocities[j]),
+                                                      np.asarray(t_dirs[j]))
             stable = relabel(res.labels, mapping)
             labels = _lookup(track_ids, win_ids, stable.astype(np.int32), -1).astype(np.int32)
             memory = int(self.params['label_memory'])

@@ -17,7 +17,7 @@ import pytest
 from scenes import random_scene
 
 from mlofc_ros.solver import segment_lines
-from mlofc_ros.solver.general import fit_body, line_residuals, LineObservations
+from mlofc_ros.solver.general import fit_body, general_warm, line_residuals, LineObservations
 from mlofc_ros.solver.lines import rotation_matrix
 
 
@@ -82,3 +82,38 @@ def test_general_beats_rotation_only_on_spinning_bodies():
             lab = segment_lines(tracks, 2, intrinsics=intr, method=method).labels
             wrong[method].append(min(np.mean(lab != labels), np.mean(lab != 1 - labels)))
     assert np.mean(wrong['general']) < np.mean(wrong['robust'])
+
+
+def test_warm_start_tracks_the_previous_motions_in_a_few_steps():
+    # two spinning bodies, labels and motions from a "previous window" slightly off
+    a, w_a, t_a = spinning_lines(n_lines=20, seed=3)
+    b, w_b, t_b = spinning_lines(n_lines=20, seed=4, centre=(-0.4, 0.3, 7.0), deg=-3.0)
+    tracks = np.concatenate([a, b])
+    truth = np.repeat([0, 1], 20)
+    obs = LineObservations(tracks, (F, F, C, C))
+    W0 = np.array([w_a, w_b]) * 1.05
+    T0 = np.array([t_a, t_b])
+    init = truth.copy()
+    init[::7] = -1                                       # new tracks have no label yet
+    sol = general_warm(obs, init, W0, T0, np.array([True, True]))
+    assert sol['start'] == 'warm' and sol['inliers'] > 0.9
+    assert np.array_equal(sol['labels'], truth)
+    for b_, w in enumerate((w_a, w_b)):
+        assert np.linalg.norm(sol['W'][b_] - w) / np.linalg.norm(w) < 1e-2
+
+
+def test_init_motions_are_checked_and_used():
+    tracks, w, t = spinning_lines(n_lines=25, seed=5)
+    intr = (F, F, C, C)
+    labels = np.zeros(25, dtype=np.int64)
+    with pytest.raises(ValueError, match='init_motions'):
+        segment_lines(tracks, 1, intrinsics=intr, method='general', init_labels=labels,
+                      init_motions=(np.zeros((2, 3)), np.zeros((2, 3))))
+    res = segment_lines(tracks, 1, intrinsics=intr, method='general', init_labels=labels,
+                        init_motions=(w[None] * 1.02, t[None]))
+    assert res.info['start'] == 'warm'
+    assert np.linalg.norm(res.angular_velocities[0] - w) / np.linalg.norm(w) < 1e-2
+    # unknown motions (NaN) fall back to the multi-start search
+    res = segment_lines(tracks, 1, intrinsics=intr, method='general', init_labels=labels,
+                        init_motions=(np.full((1, 3), np.nan), np.full((1, 3), np.nan)))
+    assert res.info['start'] != 'warm'

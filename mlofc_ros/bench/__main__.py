@@ -24,6 +24,7 @@ BENCHMARKS = {
     'pipeline': 'per-stage timings of the whole per-frame pipeline vs LSD alone',
     'ros': 'highest image rate the running node keeps up with, and its latency',
     'soak': 'resident memory over a long run of the pipeline (10,000 frames)',
+    'spinning': 'boxes spinning about their own centres through the pipeline: robust vs general',
 }
 
 

@@ -18,8 +18,8 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 
 from .focal import first_order_focal, profile_cost, refine_focal
-from .general import (body_covariance, general_costs, general_segmentation, LineObservations,
-                      spatial_labels)
+from .general import (body_covariance, general_costs, general_segmentation, general_warm,
+                      LineObservations, spatial_labels, WARM_INLIERS)
 from .gpca import algebraic_normals
 from .ksubspaces import assign, ksubspaces, total_cost
 from .lines import cayley_jacobian, cayley_to_rotvec, line_flows, LineFlows, rotvec_to_cayley
@@ -153,7 +153,8 @@ def _finish(flows: LineFlows, labels: np.ndarray, c: np.ndarray, costs: np.ndarr
 
 def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] = None,
                   image_size: Optional[Sequence[float]] = None, method: str = 'robust', *,
-                  seed: int = 0, init_labels: Optional[np.ndarray] = None
+                  seed: int = 0, init_labels: Optional[np.ndarray] = None,
+                  init_motions: Optional[Tuple[np.ndarray, np.ndarray]] = None
                   ) -> SegmentationResult:
     """Segment line tracks into rigid bodies by their rotation (multibody line optical flow).
 
@@ -170,13 +171,19 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         estimated (paper section 3.3, then refined with the exact known-f model).
     image_size : (w, h), optional
         Pixels; required when ``intrinsics`` is None.
-    method : {'algebraic', 'kmeans', 'algebraic+kmeans', 'robust'}
+    method : {'algebraic', 'kmeans', 'algebraic+kmeans', 'robust', 'general'}
         The paper's Algorithm 1 alone; the paper's K-means from a random start (best of
-        10 restarts); Algorithm 1 then K-means (the paper's best); ours (default).
+        10 restarts); Algorithm 1 then K-means (the paper's best); ours (default); ours with
+        a translation per body too (K >= 3, :mod:`.general`).
     seed : int
         Seed of the random parts (K-means starts, sampling); results repeat for a seed.
     init_labels : (N,) int, optional
         Labels from a previous window (``-1`` unknown), an extra starting point for 'robust'.
+    init_motions : ((n, 3), (n, 3)) float, optional
+        'general' only, with ``init_labels``: the previous window's rotation vectors (rad per
+        frame) and unit translation directions per body (``info['translation_directions']``),
+        NaN rows unknown. The bodies are then tracked by a few LM steps from them instead of
+        the multi-start search (which still runs when too few tracks stay inliers).
 
     Returns
     -------
@@ -219,7 +226,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     rng = np.random.default_rng(seed)
     if method == 'general':
         rot = segment_lines(arr, n, intr, size, 'robust', seed=seed, init_labels=init_labels)
-        return _general(arr, rot, rng, init_labels)
+        return _general(arr, rot, rng, init_labels, _check_motions(init_motions, n))
     if intr is not None:
         flows = line_flows(arr, intr)
         labels, c, costs, info = _solve_known_f(flows, arr, n, method, rng, init_labels)
@@ -255,12 +262,26 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     return _finish(flows, labels, c, costs, f, method, info)
 
 
+def _check_motions(init_motions, n: int) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+    """``(W (n, 3), T (n, 3))`` from ``init_motions`` (None stays None); NaN rows unknown."""
+    if init_motions is None:
+        return None
+    try:
+        w, t = (np.asarray(x, dtype=np.float64) for x in init_motions)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'init_motions must be (W (n, 3), T (n, 3)): {exc}') from None
+    if w.shape != (n, 3) or t.shape != (n, 3):
+        raise ValueError(f'init_motions must be two ({n}, 3) arrays, got {w.shape}, {t.shape}')
+    return w, t
+
+
 def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
-             init_labels=None) -> SegmentationResult:
+             init_labels=None, init_motions=None) -> SegmentationResult:
     """Solve with the 'general' method: rotation AND translation per body (:mod:`.general`).
 
     Starts from the rotation-only solution ``rot`` (which also supplies the focal length when
-    it was unknown) and a spatial clustering; needs three frames, else returns ``rot``.
+    it was unknown) and a spatial clustering; needs three frames, else returns ``rot``. With
+    the previous window's labels and motions, first tracks them (:func:`.general_warm`).
     """
     if arr.shape[1] < 3:
         rot.method = 'general'
@@ -270,10 +291,21 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
     size = rot.info.get('image_size')
     cx, cy = rot.info['principal_point']
     obs = LineObservations(arr, (f, f * rot.info.get('aspect', 1.0), cx, cy))
-    starts = [('rotation-only', rot.labels), ('spatial', spatial_labels(arr, n, rng))]
-    if init_labels is not None:
-        starts.insert(0, ('previous', np.asarray(init_labels)))
-    sol = general_segmentation(obs, n, starts, rot.angular_velocities)
+    sol = None
+    if init_labels is not None and init_motions is not None:
+        w0, t0 = init_motions
+        known = np.all(np.isfinite(w0), axis=1) & np.all(np.isfinite(t0), axis=1)
+        if np.any(known):
+            sol = general_warm(obs, init_labels, np.where(known[:, None], w0,
+                                                          rot.angular_velocities),
+                               np.where(known[:, None], t0, 0.0), known)
+            if sol['inliers'] < WARM_INLIERS:
+                sol = None
+    if sol is None:
+        starts = [('rotation-only', rot.labels), ('spatial', spatial_labels(arr, n, rng))]
+        if init_labels is not None:
+            starts.insert(0, ('previous', np.asarray(init_labels)))
+        sol = general_segmentation(obs, n, starts, rot.angular_velocities)
     labels = sol['labels']
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
     # translation is a nested extension: keep a body's exact rotation-only fit (T = 0) unless

@@ -240,6 +240,13 @@ def spatial_labels(tracks: np.ndarray, n: int, rng: np.random.Generator,
 SIGMA_FLOOR_PX = 0.1
 
 
+def _best_costs(costs: np.ndarray) -> np.ndarray:
+    """Smallest cost ``(N,)`` of every track over the bodies (``inf`` when it has none)."""
+    if costs.shape[1] == 0:
+        return np.full(costs.shape[0], np.inf)
+    return np.min(np.where(np.isfinite(costs), costs, np.inf), axis=1)
+
+
 def _robust_sigma2(best: np.ndarray, dof: np.ndarray) -> float:
     """Noise variance (1 px units) from the median of chi-square-normalised costs."""
     from .models import chi2_quantile
@@ -293,7 +300,7 @@ def general_segmentation(obs: LineObservations, n: int, starts: list,
                     W[b], T[b], _ = fit_body_multistart(obs, idx, w_starts[b % len(w_starts)])
                     fitted[b] = True
             costs = general_costs(obs, W, T)
-            sigma2 = _robust_sigma2(np.nanmin(costs, axis=1), dof)
+            sigma2 = _robust_sigma2(_best_costs(costs), dof)
             cap = chi2_quantile(outlier_p, dof) * sigma2
             new = assign(costs, cap)
             if np.array_equal(new, lab):
@@ -310,6 +317,68 @@ def general_segmentation(obs: LineObservations, n: int, starts: list,
             best['W'][b], best['T'][b], _ = fit_body(obs, idx, best['W'][b], best['T'][b], 40)
     best['costs'] = general_costs(obs, best['W'], best['T'])
     return best
+
+
+#: A warm start is kept when at least this share of the usable tracks stay inliers (else the
+#: full multi-start search runs).
+WARM_INLIERS = 0.5
+
+
+def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: np.ndarray,
+                 known: np.ndarray, rounds: int = 3, iterations: int = 4,
+                 outlier_p: float = 0.9999) -> dict:
+    """Track the bodies of the previous window: a few LM steps from its motions, then assign.
+
+    Parameters
+    ----------
+    obs : LineObservations
+    labels : (N,) int
+        Starting labels (the previous window's, ``-1`` unknown).
+    W0, T0 : (n, 3)
+        Starting rotation vectors (rad/frame) and translation directions (unit or zero) per
+        body, camera optical frame.
+    known : (n,) bool
+        Bodies whose ``(W0, T0)`` come from a previous fit; the others start from the
+        multi-start search at ``W0`` (their rotation-only estimate).
+    rounds, iterations : int
+        Fit/assign rounds and LM iterations per body and round.
+
+    Returns the dict of :func:`general_segmentation` (``start='warm'``) plus ``inliers``, the
+    share of usable tracks within the outlier bound.
+    """
+    from .ksubspaces import assign, total_cost
+    from .models import chi2_quantile
+    n = W0.shape[0]
+    dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
+    usable = dof > 0
+    lab = np.where(usable, np.asarray(labels, dtype=np.int64), -1)
+    W, T = np.array(W0, dtype=float), np.array(T0, dtype=float)
+    fitted = np.asarray(known, dtype=bool).copy()
+    costs = np.full((obs.n_tracks, n), np.nan)
+    sigma2, cap = 1.0, None
+    for _ in range(rounds):
+        for b in range(n):                                   # bodies, not lines
+            idx = np.flatnonzero(lab == b)
+            if idx.size < 3:
+                continue
+            if fitted[b]:
+                W[b], T[b], _ = fit_body(obs, idx, W[b], T[b], iterations)
+            else:
+                W[b], T[b], _ = fit_body_multistart(obs, idx, W[b])
+                fitted[b] = True
+        costs = general_costs(obs, W, T)
+        if not np.any(np.isfinite(costs)):
+            break
+        sigma2 = _robust_sigma2(_best_costs(costs), dof)
+        cap = chi2_quantile(outlier_p, dof) * sigma2
+        new = assign(costs, cap)
+        if np.array_equal(new, lab):
+            break
+        lab = new
+    inliers = float(np.mean(lab[usable] >= 0)) if np.any(usable) else 0.0
+    score = total_cost(costs, lab, cap) if cap is not None else np.inf
+    return {'labels': lab, 'W': W, 'T': T, 'costs': costs, 'sigma2': sigma2, 'start': 'warm',
+            'score': score, 'inliers': inliers}
 
 
 def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,

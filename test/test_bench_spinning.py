@@ -1,0 +1,62 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Scoring of ``python -m mlofc_ros.bench spinning`` on hand-made frames (no rendering)."""
+from types import SimpleNamespace
+
+import numpy as np
+
+from mlofc_ros.bench import __main__ as dispatcher
+from mlofc_ros.bench import spinning
+
+
+def _scene():
+    truth = SimpleNamespace(segments=np.array([[0, 0, 100, 0], [0, 50, 100, 50],
+                                               [0, 100, 100, 100], [0, 150, 100, 150]], float),
+                            body_ids=np.array([0, 0, 1, 1]))
+    seq = SimpleNamespace(body_names=['background', 'box0'], truth=[truth] * 3,
+                          angular_velocities=np.array([[0.0, 0, 0], [0.0, 0, 2.0]]),
+                          pivots=np.array([[0.0, 0, 5], [1.0, 0, 0]]))
+    return seq
+
+
+def _frame(labels, omega_box):
+    return SimpleNamespace(
+        segments=np.array([[1, 0, 90, 0], [1, 50, 90, 50], [1, 100, 90, 100],
+                           [1, 150, 90, 150], [300, 300, 400, 400]], float),
+        labels=np.array(labels), body_valid=np.array([True, True]),
+        angular_velocities=np.array([omega_box, [0.0, 0, 0.01]]))   # labels 0, 1
+
+
+def test_score_run_counts_wrong_unassigned_and_omega_errors():
+    seq = _scene()
+    outs = [(_frame([-1, -1, -1, -1, -1], [9.0, 9, 9]), 99.0),      # before the window fills
+            (_frame([1, 1, 0, 0, 1], [0.0, 0, 2.2]), 10.0),         # ids swapped, all right
+            (_frame([1, 0, -1, 0, 0], [0.0, 0, 1.8]), 30.0)]        # one wrong, one -1
+    s = spinning.score_run(seq, outs, first=1)
+    assert s['matched'] == 8                     # the fifth segment lies on no true edge
+    assert s['mapping'] == {1: 0, 0: 1}
+    assert s['wrong'] == 1 / 8 and s['unassigned'] == 1 / 8
+    assert np.isnan(s['omega_err'][0]) and abs(s['omega_err'][1] - 0.1) < 1e-12
+    # the box's pivot is on the x axis: the line-of-sight component of (0, 0, 2) is zero
+    assert abs(s['los_err'][1] - 1.0) < 1e-12
+    assert abs(s['static_deg_s'][0] - np.degrees(0.01)) < 1e-9
+    assert list(s['ms']) == [10.0, 30.0]
+    row = spinning.build_rows([{'scene': 'x', 'seed': 0, 'method': 'robust', 'window': 5,
+                                'score': s}])[0]
+    assert row[4] == 12.5 and row[6] == '10' and row[9] == 20.0
+
+
+def test_spinning_is_registered():
+    assert 'spinning' in dispatcher.BENCHMARKS
+    assert set(spinning.SCENES) >= {'own2+bg', 'own3+bg', 'own2', 'own3', 'cam2+bg'}
