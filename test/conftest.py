@@ -16,6 +16,8 @@
 import os
 import random
 
+import pytest
+
 os.environ.setdefault('HOME', '/tmp')
 os.environ.setdefault('MPLBACKEND', 'Agg')
 for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
@@ -23,3 +25,12 @@ for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
 if 'ROS_DOMAIN_ID' not in os.environ:
     # 1..100 stays inside the default DDS port range; random so parallel runs do not meet
     os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 100))
+
+
+@pytest.fixture(scope='module')
+def ros():
+    """rclpy initialised for the module's tests (real DDS in the run's own domain)."""
+    import rclpy
+    rclpy.init()
+    yield
+    rclpy.try_shutdown()

@@ -18,55 +18,32 @@ import pathlib
 import signal
 import subprocess
 import sys
-import threading
 import time
 from types import SimpleNamespace
-from typing import Callable, Dict, List
+from typing import Dict, List
 
+from dds import DdsHarness, FRAME_ID, image_msg, stamp_of
 from geometry_msgs.msg import TwistWithCovarianceStamped
 import numpy as np
 import pytest
-from rcl_interfaces.msg import Parameter as ParameterMsg
-from rcl_interfaces.srv import GetParameters, SetParameters
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from test_pipeline import (evaluate, GOAL_MISCLASSIFIED, GOAL_OMEGA_ERROR, small_sequence,
                            two_box_sequence)
 
 from mlofc_ros import params as P
 from mlofc_ros.camera import CameraModel
-from mlofc_ros.image.decode import gray_to_image_fields
 from mlofc_ros.messages.segments import SEGMENT_FIELDS
 from mlofc_ros.node import MlofcNode, parameter_descriptor
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info,
                                     LINEAR_UNKNOWN_VARIANCE, parse_segments_msg, parse_twist_msg,
-                                    segments_msg, stamp_to_seconds, twist_msg)
+                                    segments_msg, twist_msg)
 
 
 pytestmark = pytest.mark.ros
 
 EXECUTABLE = pathlib.Path(sys.executable).parent / 'mlofc_node'
-FRAME_ID = 'camera_optical_frame'
-
-
-@pytest.fixture(scope='module')
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
-
-
-def image_msg(gray: np.ndarray, t: float) -> Image:
-    msg = Image()
-    for key, value in gray_to_image_fields(gray, 'mono8').items():
-        setattr(msg, key, value)
-    msg.header.stamp.sec = int(t)
-    msg.header.stamp.nanosec = int(round((t - int(t)) * 1e9))
-    msg.header.frame_id = FRAME_ID
-    return msg
 
 
 def camera_info_msg(camera, size, t: float = 0.0) -> CameraInfo:
@@ -79,69 +56,15 @@ def camera_info_msg(camera, size, t: float = 0.0) -> CameraInfo:
     return msg
 
 
-class Harness:
+class Harness(DdsHarness):
     """A test node and an executor spinning in a thread (with the node under test, if any)."""
 
     def __init__(self, *nodes) -> None:
-        self.node = rclpy.create_node('mlofc_test_harness')
-        self.executor = SingleThreadedExecutor()
-        for n in (self.node,) + nodes:
-            self.executor.add_node(n)
-        self.lock = threading.Lock()
-        self.inbox: Dict[str, List] = {}
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
-
-    def collect(self, msg_type, topic: str, qos=None) -> List:
-        box = self.inbox.setdefault(topic, [])
-
-        def cb(msg):
-            with self.lock:
-                box.append(msg)
-        self.node.create_subscription(msg_type, topic, cb, qos or QoSProfile(depth=100))
-        return box
-
-    def wait(self, pred: Callable[[], bool], timeout: float = 10.0) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if pred():
-                return True
-            time.sleep(0.01)
-        return pred()
-
-    def call(self, srv_type, name: str, request, timeout: float = 10.0):
-        client = self.node.create_client(srv_type, name)
-        assert client.wait_for_service(timeout_sec=timeout), f'no service {name}'
-        future = client.call_async(request)
-        assert self.wait(future.done, timeout), f'{name} did not answer'
-        self.node.destroy_client(client)
-        return future.result()
-
-    def set_params(self, node_name: str, **values):
-        req = SetParameters.Request()
-        req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
-        return self.call(SetParameters, f'{node_name}/set_parameters', req).results
-
-    def get_params(self, node_name: str, *names):
-        req = GetParameters.Request()
-        req.names = list(names)
-        values = self.call(GetParameters, f'{node_name}/get_parameters', req).values
-        return [Parameter.from_parameter_msg(ParameterMsg(name=n, value=v)).value
-                for n, v in zip(names, values)]
+        super().__init__('mlofc_test_harness', *nodes)
+        self.start()
 
     def topics(self) -> Dict[str, List[str]]:
         return dict(self.node.get_topic_names_and_types())
-
-    def close(self, *nodes) -> None:
-        self.executor.shutdown()
-        self.thread.join(timeout=10)
-        for n in nodes:
-            n.destroy_node()
-        self.node.destroy_node()
-
-
-def stamp_of(msg) -> float:
-    return round(stamp_to_seconds(msg.header.stamp), 6)
 
 
 def send_frames(h: Harness, pub, frames, stamps, clouds: List, cam_pub=None, cam=None,

@@ -18,19 +18,16 @@ Every test runs MlofcNode in process next to a test node over real DDS; warnings
 ``/rosout`` as any ROS tool would see them, the node's health from ``/diagnostics``.
 """
 import math
-import threading
 import time
-from typing import Callable, Dict, List
+from typing import Dict, List
 
 import cv2
+from dds import DdsHarness, FRAME_ID, image_msg, stamp, stamp_of
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import TwistWithCovarianceStamped
 import numpy as np
 import pytest
-from rcl_interfaces.msg import Log, Parameter as ParameterMsg
-from rcl_interfaces.srv import GetParameters, SetParameters
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
+from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile,
                        ReliabilityPolicy)
@@ -38,53 +35,25 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from test_pipeline import small_sequence
 
 from mlofc_ros import pipeline as pipeline_module
-from mlofc_ros.image import gray_to_image_fields, image_msg_to_gray
+from mlofc_ros.image import image_msg_to_gray
 from mlofc_ros.node import MlofcNode
 from mlofc_ros.ros_messages import parse_segments_msg, parse_twist_msg, stamp_to_seconds
 
 pytestmark = pytest.mark.ros
 
-FRAME_ID = 'camera_optical_frame'
 LOG_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-@pytest.fixture(scope='module')
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
-
-
-def stamp(msg, t: float):
-    msg.header.stamp.sec = int(math.floor(t))
-    msg.header.stamp.nanosec = int(round((t - math.floor(t)) * 1e9))
-    msg.header.frame_id = FRAME_ID
-    return msg
-
-
-def image_msg(gray: np.ndarray, t: float, encoding: str = 'mono8') -> Image:
-    msg = Image()
-    for key, value in gray_to_image_fields(gray, encoding).items():
-        setattr(msg, key, value)
-    return stamp(msg, t)
-
-
-def stamp_of(msg) -> float:
-    return round(stamp_to_seconds(msg.header.stamp), 6)
-
-
-class Harness:
+class Harness(DdsHarness):
     """The node under test and a test node in one executor, plus its /rosout warnings."""
 
+    timeout = 30.0
+
     def __init__(self, node: MlofcNode) -> None:
+        super().__init__('robustness_harness', node, namespace=node.get_namespace())
         self.mlofc = node
         self.ns = node.get_namespace()
-        self.node = rclpy.create_node('robustness_harness', namespace=self.ns)
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(node)
-        self.executor.add_node(self.node)
-        self.lock = threading.Lock()
         name = node.get_logger().name
         self.logs: List[Log] = []
         self.node.create_subscription(Log, '/rosout', self._on_log, LOG_QOS)
@@ -94,8 +63,7 @@ class Harness:
                                                     qos_profile_sensor_data)
         self.info_pub = self.node.create_publisher(CameraInfo, f'{self.ns}/camera_info',
                                                    qos_profile_sensor_data)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
+        self.start()
         assert self.wait(lambda: self.image_pub.get_subscription_count() == 1
                          and self.info_pub.get_subscription_count() == 1
                          and self.node.count_publishers(f'{self.ns}/mlofc/segments') == 1,
@@ -106,27 +74,9 @@ class Harness:
             with self.lock:
                 self.logs.append(msg)
 
-    def collect(self, msg_type, topic: str) -> List:
-        box: List = []
-
-        def cb(msg):
-            with self.lock:
-                box.append(msg)
-        self.node.create_subscription(msg_type, topic, cb, QoSProfile(depth=100))
-        return box
-
     def twists(self, n: int) -> Dict[int, List]:
         return {i: self.collect(TwistWithCovarianceStamped, f'{self.ns}/mlofc/body_{i}/twist')
                 for i in range(n)}
-
-    @staticmethod
-    def wait(pred: Callable[[], bool], timeout: float = 30.0) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if pred():
-                return True
-            time.sleep(0.01)
-        return pred()
 
     def warnings(self, text: str) -> List[str]:
         with self.lock:
@@ -162,25 +112,11 @@ class Harness:
         assert self.wait(lambda: self.mlofc.stats['skipped'] > s, timeout), 'not skipped'
         assert self.mlofc.pending_frames() == 0 and len(self.clouds) == n
 
-    def call(self, srv_type, name: str, request, timeout: float = 20.0):
-        client = self.node.create_client(srv_type, name)
-        assert client.wait_for_service(timeout_sec=timeout), f'no service {name}'
-        future = client.call_async(request)
-        assert self.wait(future.done, timeout), f'{name} did not answer'
-        self.node.destroy_client(client)
-        return future.result()
-
     def set_params(self, **values):
-        req = SetParameters.Request()
-        req.parameters = [Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
-        return self.call(SetParameters, f'{self.ns}/mlofc/set_parameters', req).results
+        return super().set_params(f'{self.ns}/mlofc', **values)
 
     def get_params(self, *names):
-        req = GetParameters.Request()
-        req.names = list(names)
-        values = self.call(GetParameters, f'{self.ns}/mlofc/get_parameters', req).values
-        return [Parameter.from_parameter_msg(ParameterMsg(name=n, value=v)).value
-                for n, v in zip(names, values)]
+        return super().get_params(f'{self.ns}/mlofc', *names)
 
     def accounting(self) -> Dict[str, int]:
         """Check received = processed + dropped + skipped and one cloud per processed frame."""
@@ -193,10 +129,7 @@ class Harness:
         return s
 
     def close(self) -> None:
-        self.executor.shutdown()
-        self.thread.join(timeout=10)
-        self.mlofc.destroy_node()
-        self.node.destroy_node()
+        super().close(self.mlofc)
 
 
 @pytest.fixture
