@@ -29,7 +29,7 @@ if 'ROS_DOMAIN_ID' not in os.environ:
 
 @pytest.fixture(scope='module')
 def ros():
-    """rclpy initialised for the module's tests (real DDS in the run's own domain)."""
+    """Initialise rclpy for the module's tests (real DDS in the run's own domain)."""
     import rclpy
     rclpy.init()
     yield

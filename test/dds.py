@@ -40,7 +40,7 @@ def stamp(msg, t: float):
 
 
 def image_msg(gray: np.ndarray, t: float, encoding: str = 'mono8') -> Image:
-    """A ``sensor_msgs/Image`` of ``gray (H, W) uint8`` in ``encoding``, stamped ``t``."""
+    """Build a ``sensor_msgs/Image`` of ``gray (H, W) uint8`` in ``encoding``, stamped ``t``."""
     msg = Image()
     for key, value in gray_to_image_fields(gray, encoding).items():
         setattr(msg, key, value)
