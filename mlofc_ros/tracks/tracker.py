@@ -309,8 +309,10 @@ class LineTracker:
 
     def _lk(self, gray: np.ndarray, p0: np.ndarray, init: Optional[np.ndarray],
             levels: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """LK from the previous frame: points (n, 2) float32 -> (new (n, 2), status (n,),
-        minimum eigenvalue (n,) of the window's gradient matrix, OpenCV's normalisation).
+        """LK from the previous frame: points (n, 2) float32 -> (new (n, 2), status, eig).
+
+        ``status`` (n,) bool; ``eig`` (n,) the minimum eigenvalue of each window's gradient
+        matrix (OpenCV's normalisation).
 
         Runs on the images resized by ``klt_scale`` (pixel centres mapped exactly); the edge
         refinement restores full-resolution accuracy afterwards.
