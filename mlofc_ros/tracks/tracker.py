@@ -17,8 +17,8 @@ Per frame, vectorised over tracks and detections (no Python loop per line):
 
 1. *Carry*. A track with a velocity is predicted by it (the last displacement of both
    endpoints, turned by the line's smoothed turn rate) and re-located on the image edges by
-   :func:`refine_lines`: a 1D search for the gradient maximum of the track's polarity along
-   the line's normal at a few samples, then a robust total-least-squares fit.
+   :func:`refine_lines`: a 1D search for the gradient maximum along the line's normal at a
+   few samples, then a robust total-least-squares fit.
    Only the position *across* the line is measured, which is all a line has (endpoints need
    not correspond; along an edge image motion is ill-posed anyway). New tracks, and tracks
    whose prediction finds too little edge support, are carried by pyramidal Lucas-Kanade
@@ -201,7 +201,8 @@ class LineTracker:
       ``refine_inlier_px``, ``refine_min_relative``: the edge search of
       :func:`refine_lines`; ``min_support``: share of its samples that must agree;
       ``refine_polarity``: search for edges of the track's polarity only (the unsigned search
-      is the fallback for tracks that find too little support so).
+      is the fallback for tracks that find too little support so); off by default: on the
+      rendered sequences it gained 0-1.7 points of tracked-5 for ~1.5 ms CPU per frame.
     * ``turn_smoothing``: weight in [0, 1] of the last frame's turn of a line in its smoothed
       turn rate, by which its displacement is rotated for the next prediction (0 = constant
       image velocity).
@@ -224,7 +225,7 @@ class LineTracker:
                  refine_radius: int = 3, refine_min_gradient: float = 8.0,
                  refine_inlier_px: float = 0.5, refine_min_relative: float = 0.3,
                  min_support: float = 0.4, predict: str = 'velocity', max_turn_deg: float = 12.0,
-                 max_tracks: int = 2000, refine_polarity: bool = True,
+                 max_tracks: int = 2000, refine_polarity: bool = False,
                  turn_smoothing: float = 0.3, rescue_gate: float = 2.0,
                  klt_min_eig: float = 1e-2) -> None:
         if int(detect_every) < 1:
