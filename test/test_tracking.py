@@ -127,3 +127,36 @@ def test_refine_lines_recovers_shifted_edge():
     assert support[0] > 0.9 and rms[0] < 0.1
     np.testing.assert_allclose(out[0, [0, 2]], 149.5, atol=0.05)
     np.testing.assert_allclose(out[0, [1, 3]], seg[0, [1, 3]], atol=0.1)
+
+
+def test_refine_lines_signed_skips_opposite_polarity():
+    img = np.full((200, 300), 40, np.float32)
+    img[:, 150:153] = 200.0                # bright stripe: rising edge 149.5, falling 152.5
+    # predicted next to the falling edge but oriented like the rising one: walking down the
+    # image (+v) the left is +u, the bright side of the rising edge
+    seg = np.array([[152.0, 30.0, 152.0, 170.0]])
+    unsigned, _, _ = refine_lines(img, seg, radius=3)
+    signed, support, _ = refine_lines(img, seg, radius=3, signed=True)
+    np.testing.assert_allclose(unsigned[0, [0, 2]], 152.5, atol=0.1)   # nearest edge
+    np.testing.assert_allclose(signed[0, [0, 2]], 149.5, atol=0.1)     # same polarity only
+    assert support[0] > 0.9
+
+
+def test_own_centre_spinning_boxes_keep_ids():
+    """Boxes spinning about their own centres: lines turn fast, faces go edge-on.
+
+    16 frames, seed 0: measured 0.911 tracked-5, 1.7% id switches, 0.953 precision; without
+    the turn-rate prediction, textured-only along-line KLT motion and the second-chance
+    association it was 0.874, 2.1% and 0.928.
+    """
+    render = pytest.importorskip('mlofc_ros.render')
+    from mlofc_ros.bench.frontend import score_tracks
+    seq = render.render_sequence(n_boxes=2, n_frames=16, size=(640, 480), motion='own_centre',
+                                 seed=0)
+    tr = LineTracker()
+    ids, segs = zip(*(tr.update(f) for f in seq.frames))
+    sc = score_tracks(ids, segs, seq.truth)
+    assert sc['windows'] > 500
+    assert sc['tracked_5'] >= 0.9, sc
+    assert sc['id_switch_pct'] < 1.9, sc
+    assert sc['precision'] >= 0.94, sc
