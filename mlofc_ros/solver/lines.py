@@ -24,7 +24,7 @@ about the camera centre maps ``m`` to ``m' = R m`` exactly. With the Cayley vect
 
 so the row ``y_j = [m_bar x e_j ; -(e_j . g)]`` of R^4 is orthogonal to ``u = [c ; 1]``.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Tuple
 
 import numpy as np
@@ -170,6 +170,9 @@ class LineFlows:
     b: np.ndarray            # (P, 2)
     Mw: np.ndarray           # (P, 2, 3) M whitened per track (see :func:`whiten_tracks`)
     bw: np.ndarray           # (P, 2)    b whitened per track
+    # derived per-track quantities computed once (the arrays above are never modified):
+    # 'pairs' (N,) and the TrackStats of :func:`.models.track_stats` by weighting
+    cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n_pairs(self) -> int:
@@ -181,8 +184,13 @@ class LineFlows:
         return np.concatenate([self.M, -self.b[..., None]], axis=-1)
 
     def pairs_per_track(self) -> np.ndarray:
-        """``(N,)`` number of frame pairs of every track."""
-        return np.bincount(self.pair_track, minlength=self.n_tracks)
+        """``(N,)`` number of frame pairs of every track (read-only, computed once)."""
+        out = self.cache.get('pairs')
+        if out is None:
+            out = np.bincount(self.pair_track, minlength=self.n_tracks)
+            out.setflags(write=False)
+            self.cache['pairs'] = out
+        return out
 
     @property
     def whitened_rows(self) -> np.ndarray:

@@ -47,7 +47,17 @@ class TrackStats:
 
 
 def track_stats(flows: LineFlows, weighted: bool = True) -> TrackStats:
-    """Accumulate :class:`TrackStats` of every track (vectorised over pairs)."""
+    """Accumulate :class:`TrackStats` of every track (vectorised over pairs).
+
+    Cached on ``flows``: the robust solve, its final pass and the covariances all need them.
+    """
+    key = ('stats', bool(weighted))
+    if key not in flows.cache:
+        flows.cache[key] = _track_stats(flows, weighted)
+    return flows.cache[key]
+
+
+def _track_stats(flows: LineFlows, weighted: bool) -> TrackStats:
     M, b = (flows.Mw, flows.bw) if weighted else (flows.M, flows.b)
     n, pt = flows.n_tracks, flows.pair_track
     A = sum_by_track(np.einsum('pji,pjk->pik', M, M), pt, n)
