@@ -30,7 +30,7 @@ import numpy as np
 from .gpca import algebraic_normals
 from .ksubspaces import assign, ksubspaces, total_cost
 from .lines import first_midpoints, LineFlows
-from .models import (chi2_quantile, fit_bodies, quad_costs, solve_normal_equations,
+from .models import (chi2_quantile, fit_bodies, median, quad_costs, solve_normal_equations,
                      track_costs, track_stats, TrackStats)
 
 #: A warm start is accepted alone when it leaves at least this share of the tracks as inliers
@@ -49,7 +49,7 @@ def noise_sigma(costs: np.ndarray, labels: np.ndarray, dof: np.ndarray,
     if not np.any(ok):
         return 1.0
     best = costs[np.flatnonzero(ok), labels[ok]] / chi2_quantile(0.5, dof[ok])
-    return float(max(np.sqrt(np.median(best)), floor))
+    return float(max(np.sqrt(median(best)), floor))
 
 
 def _sample_pairs(rng: np.random.Generator, pool: np.ndarray, mid: np.ndarray,
