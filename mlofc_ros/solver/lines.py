@@ -129,7 +129,8 @@ def interpretation_normals(tracks: np.ndarray, intrinsics: Intrinsics,
     # d x = K2 d(u, v) (K2: first two columns of K^-1). So cov = s^2 P Q P / |n|^2 with
     # Q = sum over both endpoints of [x]x K2 K2^T [x]x^T, written out (x_2 = 1) and expanded:
     # elementwise products instead of chains of stacked 3x3 matmuls (4x faster at N = 200)
-    ifx2, ify2 = 1.0 / intrinsics[0] ** 2, 1.0 / intrinsics[1] ** 2
+    # numpy scalars: overflow of extreme (fuzzed) focal lengths gives inf, as the matmuls did
+    ifx2, ify2 = np.float64(1.0 / intrinsics[0]) ** 2, np.float64(1.0 / intrinsics[1]) ** 2
     q = np.zeros(m.shape + (3,))
     q[..., 0, 0] = 2.0 * ify2
     q[..., 1, 1] = 2.0 * ifx2
