@@ -134,6 +134,7 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
     """
     stats = track_stats(flows, weighted=True)
     dof = 2.0 * flows.pairs_per_track()
+    refined = []
     if init_labels is not None:
         # warm start (the previous window's labels): when they still explain the window, the
         # other starts are skipped -- the common case in a stream, and 3-5x cheaper
@@ -142,9 +143,8 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
         counts = np.bincount(lab[lab >= 0], minlength=n)
         if np.all(counts >= 2) and np.mean(lab[stats.usable] >= 0) >= WARM_INLIERS:
             return _final_pass(flows, lab, c, dof, sigma, 'previous', {})
+        refined.append(('previous', lab, c, costs))     # still a candidate: refined already
     starts = []
-    if init_labels is not None:
-        starts.append(('previous', np.asarray(init_labels, dtype=np.int64)))
     if n == 1:
         starts.append(('all', np.where(stats.usable, 0, -1)))
     else:
@@ -159,7 +159,7 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
     if n > 1:
         starts.append(('msac', sequential_msac(stats, tracks, n, dof, rng)[0]))
     # trimmed: gross outliers (mis-tracks) are excluded from every fit from the start
-    refined = [(name,) + ksubspaces(stats, n, lab, trim_dof=dof) for name, lab in starts]
+    refined += [(name,) + ksubspaces(stats, n, lab, trim_dof=dof) for name, lab in starts]
     # exact residuals (not the quadratic form) so that zero noise gives zero, not rounding: one
     # evaluation for every candidate's bodies at once
     exact = np.split(track_costs(flows, np.concatenate([r[2] for r in refined]), weighted=True),
