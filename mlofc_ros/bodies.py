@@ -120,7 +120,8 @@ class BodyTracker:
         ids = np.asarray(track_ids, dtype=np.int64).ravel()
         if not self._track_ids.size or not ids.size:
             return np.zeros(ids.shape, dtype=np.intp), np.zeros(ids.shape, dtype=bool)
-        pos = np.clip(np.searchsorted(self._track_ids, ids), 0, self._track_ids.size - 1)
+        # (searchsorted is >= 0: np.minimum, not the much slower np.clip)
+        pos = np.minimum(np.searchsorted(self._track_ids, ids), self._track_ids.size - 1)
         return pos, self._track_ids[pos] == ids
 
     def previous_labels(self, track_ids: np.ndarray,
@@ -206,8 +207,8 @@ class BodyTracker:
         slots = self.n_slots
         prev = self.previous_labels(ids)
         both = (lab >= 0) & (prev >= 0) & (prev < slots)
-        overlap = np.zeros((n, slots))
-        np.add.at(overlap, (lab[both], prev[both]), 1.0)
+        overlap = np.bincount(lab[both] * slots + prev[both],
+                              minlength=n * slots).astype(float).reshape(n, slots)
         overlap /= np.maximum(overlap.sum(axis=1, keepdims=True), 1.0)
         sim = np.zeros((n, slots))
         for s, ws in self._omegas.items():   # <= 8 slots

@@ -29,6 +29,7 @@ Example::
 from collections import deque
 from dataclasses import dataclass, field
 import math
+import statistics
 import time
 from typing import Any, Deque, Dict, List, Optional, Tuple
 
@@ -327,7 +328,9 @@ class Pipeline:
                 self._intervals.clear()
             else:
                 gap = float(self.params['max_frame_gap'])
-                nominal = float(np.median(self._intervals)) if self._intervals else math.nan
+                # statistics.median: the same value as np.median, ~20x cheaper on a few numbers
+                nominal = (float(statistics.median(self._intervals)) if self._intervals
+                           else math.nan)
                 if gap > 0 and math.isfinite(nominal) and dt > gap * nominal:
                     problems.append(f'{dt:.3f} s since the last frame (> {gap:g} x '
                                     f'{nominal:.3f} s); window restarted')
@@ -378,7 +381,9 @@ class Pipeline:
 
         n_req = int(self.params['num_bodies'])
         fill = len(self._stamps)
-        interval = float(np.median(np.diff(self._stamps))) if fill >= 2 else math.nan
+        stamps = list(self._stamps)
+        interval = (float(statistics.median([b - a for a, b in zip(stamps, stamps[1:])]))
+                    if fill >= 2 else math.nan)
         labels = np.full(len(segments), -1, dtype=np.int32)
         carried = np.zeros(len(segments), dtype=bool)
         residuals = np.full(len(segments), np.nan, dtype=np.float32)
@@ -417,9 +422,11 @@ class Pipeline:
             valid = (np.all(np.isfinite(omega), axis=1)
                      & np.all(np.isfinite(cov.reshape(len(cov), -1)), axis=1)
                      & (support >= MIN_BODY_TRACKS))
-            tracks = np.asarray(win_tracks, dtype=float)
-            with np.errstate(invalid='ignore'):
-                mid = np.nanmean(0.5 * (tracks[..., :2] + tracks[..., 2:]), axis=1)
+            mid = None
+            if self.bodies.n_slots == 0:      # positions only order the bodies of a first window
+                tracks = np.asarray(win_tracks, dtype=float)
+                with np.errstate(invalid='ignore'):
+                    mid = np.nanmean(0.5 * (tracks[..., :2] + tracks[..., 2:]), axis=1)
             mapping = self.bodies.update(win_ids, res.labels, omega, valid, positions=mid)
             n_out = max(self.n_bodies, int(mapping.max()) + 1 if mapping.size else 0)
             w_out, c_out, v_out = _invalid_bodies(n_out)

@@ -148,3 +148,40 @@ def test_unknown_f_rows_lie_on_a_quartic():
     rows = unknown_f_rows_from_normals(m, e, RNG.normal(size=(50, 3)))
     rows /= np.linalg.norm(rows, axis=1, keepdims=True)
     assert np.max(np.abs(embed(rows, 4) @ q)) < 1e-9
+
+
+def _ksubspaces_naive(stats, n, labels, dof, max_iter=100):
+    """K-subspaces with trimming as a plain loop (no cycle detection), the reference."""
+    from mlofc_ros.solver.ksubspaces import _reseed_empty, assign, trim_bound
+    from mlofc_ros.solver.models import fit_stats, quad_costs
+    labels, steps = labels.copy(), 0
+    for steps in range(1, max_iter + 1):
+        c, _ = fit_stats(stats, labels, n)
+        costs = quad_costs(stats, c)
+        new = _reseed_empty(assign(costs, trim_bound(costs, dof)), costs, n, 2)
+        if np.array_equal(new, labels):
+            break
+        labels = new
+    return labels, c, costs, steps
+
+
+@pytest.mark.parametrize('seed', [2, 22])
+def test_ksubspaces_cycle_jump_gives_the_plain_loop_result(seed):
+    # trimming makes these labellings cycle: the plain loop runs all 100 iterations, and the
+    # cycle jump must end on exactly the same labels, c and costs
+    from mlofc_ros.bench.accuracy import add_outliers
+    from mlofc_ros.solver.core import _check_tracks
+    from mlofc_ros.solver.ksubspaces import ksubspaces
+    from mlofc_ros.solver.models import track_stats
+    from mlofc_ros.synthetic import make_scene
+    sc = make_scene(2, 15, n_frames=5, noise_px=2.0, seed=seed)
+    tracks, _ = add_outliers(sc.tracks, 0.3, np.random.default_rng(seed))
+    flows = line_flows(_check_tracks(tracks), sc.intrinsics)
+    stats, dof = track_stats(flows), 2.0 * flows.pairs_per_track()
+    init = np.random.default_rng(seed).integers(-1, 2, tracks.shape[0])
+    lab0, c0, costs0, steps = _ksubspaces_naive(stats, 2, init, dof)
+    assert steps == 100                                   # the case does cycle
+    lab, c, costs = ksubspaces(stats, 2, init, trim_dof=dof)
+    assert np.array_equal(lab, lab0)
+    assert np.array_equal(c, c0)
+    assert np.array_equal(costs, costs0, equal_nan=True)

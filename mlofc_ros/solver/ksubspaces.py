@@ -16,7 +16,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from .models import chi2_quantile, fit_stats, quad_costs, TrackStats
+from .models import chi2_quantile, fit_stats, median, quad_costs, TrackStats
 
 
 def assign(costs: np.ndarray, threshold: Optional[np.ndarray] = None) -> np.ndarray:
@@ -78,30 +78,55 @@ def ksubspaces(stats: TrackStats, n: int, labels: np.ndarray, max_iter: int = 10
     labels : (N,), c : (n, 3) Cayley vectors, costs : (N, n).
     """
     labels = np.asarray(labels, dtype=np.int64).copy()
-    c = costs = None
-    for _ in range(max_iter):
-        c, _ = fit_stats(stats, labels, n)
+    # the chi-square quantiles of the trimming depend on the dof only: computed once
+    trim_q = None if trim_dof is None else (chi2_quantile(0.5, trim_dof),
+                                            chi2_quantile(trim_p, trim_dof))
+
+    def step(lab: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        c, _ = fit_stats(stats, lab, n)
         costs = quad_costs(stats, c)
         bound = threshold
         if bound is None and trim_dof is not None:
-            bound = trim_bound(costs, trim_dof, trim_p)
+            bound = trim_bound(costs, trim_dof, trim_p, quantiles=trim_q)
         new = assign(costs, bound)
         if threshold is None:
             new = _reseed_empty(new, costs, n, min_tracks)
+        return c, costs, new
+
+    history, seen = [labels], {labels.tobytes(): 0}
+    c = costs = None
+    for it in range(max_iter):
+        c, costs, new = step(labels)
         if np.array_equal(new, labels):
             break
+        j = seen.get(new.tobytes())
+        if j is not None:
+            # labels seen before: a cycle (trimming can flip borderline tracks back and forth).
+            # Each step depends on the labels only, so the remaining iterations would go round
+            # it: jump to where max_iter iterations end (the same result, without the laps)
+            period = it + 1 - j
+            c, costs, _ = step(history[j + (max_iter - 1 - j) % period])
+            return history[j + (max_iter - j) % period].copy(), c, costs
+        seen[new.tobytes()] = it + 1
+        history.append(new)
         labels = new
     return labels, c, costs
 
 
 def trim_bound(costs: np.ndarray, dof: np.ndarray, p: float = 0.9999,
-               floor: float = 1e-8) -> np.ndarray:
-    """Per-track chi-square bound ``(N,)`` at the noise estimated from the median best cost."""
+               floor: float = 1e-8, quantiles: Optional[Tuple[np.ndarray, np.ndarray]] = None
+               ) -> np.ndarray:
+    """Per-track chi-square bound ``(N,)`` at the noise estimated from the median best cost.
+
+    ``quantiles``: ``(chi2_quantile(0.5, dof), chi2_quantile(p, dof))`` when already computed.
+    """
     ok = np.isfinite(costs).all(axis=1) & (dof > 0)
     if not np.any(ok):
         return np.full(costs.shape[0], np.inf)
-    best = np.min(costs[ok], axis=1) / chi2_quantile(0.5, dof[ok])
-    return chi2_quantile(p, dof) * max(float(np.median(best)), floor)
+    q50, qp = quantiles if quantiles is not None else (chi2_quantile(0.5, dof),
+                                                       chi2_quantile(p, dof))
+    best = np.min(costs[ok], axis=1) / q50[ok]
+    return qp * max(median(best), floor)
 
 
 def total_cost(costs: np.ndarray, labels: np.ndarray, cap: Optional[np.ndarray] = None) -> float:

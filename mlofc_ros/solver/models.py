@@ -22,7 +22,7 @@ Two residuals exist side by side:
   endpoint variance it is chi-square with ``2 * pairs`` degrees of freedom.
 """
 from dataclasses import dataclass
-from typing import Tuple
+from typing import Optional, Tuple
 
 import numpy as np
 
@@ -44,10 +44,21 @@ class TrackStats:
     k: np.ndarray       # (N,)
     usable: np.ndarray  # (N,) bool: the track has at least one frame pair
     weighted: bool
+    stacked: Optional[np.ndarray] = None   # (N, 12) [A, g], see fit_stats
 
 
 def track_stats(flows: LineFlows, weighted: bool = True) -> TrackStats:
-    """Accumulate :class:`TrackStats` of every track (vectorised over pairs)."""
+    """Accumulate :class:`TrackStats` of every track (vectorised over pairs).
+
+    Cached on ``flows``: the robust solve, its final pass and the covariances all need them.
+    """
+    key = ('stats', bool(weighted))
+    if key not in flows.cache:
+        flows.cache[key] = _track_stats(flows, weighted)
+    return flows.cache[key]
+
+
+def _track_stats(flows: LineFlows, weighted: bool) -> TrackStats:
     M, b = (flows.Mw, flows.bw) if weighted else (flows.M, flows.b)
     n, pt = flows.n_tracks, flows.pair_track
     A = sum_by_track(np.einsum('pji,pjk->pik', M, M), pt, n)
@@ -76,10 +87,20 @@ def quad_costs(stats: TrackStats, c: np.ndarray) -> np.ndarray:
 def fit_stats(stats: TrackStats, labels: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
     """Least-squares ``c (n, 3)`` per body from its tracks' statistics; information (n, 3, 3)."""
     use = (labels >= 0) & stats.usable
-    info, rhs = np.zeros((n, 3, 3)), np.zeros((n, 3))
-    np.add.at(info, labels[use], stats.A[use])
-    np.add.at(rhs, labels[use], stats.g[use])
+    # one weighted bincount over the 12 entries (A, g) of every track: it adds in track order
+    # like np.add.at (the same sums), several times faster
+    vals = _stacked(stats)[use]
+    bins = (labels[use, None] * 12 + np.arange(12)).ravel()
+    sums = np.bincount(bins, weights=vals.ravel(), minlength=12 * n).reshape(n, 12)
+    info, rhs = sums[:, :9].reshape(n, 3, 3), sums[:, 9:]
     return solve_normal_equations(info, rhs), info
+
+
+def _stacked(stats: TrackStats) -> np.ndarray:
+    """``(N, 12)``: every track's ``A`` (row-major) and ``g`` side by side (computed once)."""
+    if stats.stacked is None:
+        stats.stacked = np.concatenate([stats.A.reshape(-1, 9), stats.g], axis=1)
+    return stats.stacked
 
 
 def sum_by_track(values: np.ndarray, pair_track: np.ndarray, n_tracks: int) -> np.ndarray:
@@ -139,6 +160,20 @@ def solve_normal_equations(info: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     scale = np.trace(info, axis1=-2, axis2=-1)[..., None, None] / 3.0
     ridge = 1e-9 * np.maximum(scale, 1e-300) * np.eye(3)
     return np.linalg.solve(info + ridge, rhs[..., None])[..., 0]
+
+
+def median(x: np.ndarray) -> float:
+    """``np.median`` of a 1-D array without nan, from one partition (same value, less overhead).
+
+    It runs in every K-subspaces iteration, where np.median's generic machinery cost more
+    than the median itself.
+    """
+    m = x.shape[0]
+    h = m // 2
+    if m % 2:
+        return float(np.partition(x, h)[h])
+    part = np.partition(x, [h - 1, h])
+    return float((part[h - 1] + part[h]) / 2.0)
 
 
 #: Standard normal quantiles for the chi-square levels used here (no scipy at runtime).

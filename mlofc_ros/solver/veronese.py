@@ -20,6 +20,7 @@ The multibody constraint ``prod_i (y . u_i) = 0`` is linear in the monomials of 
 from functools import lru_cache
 import itertools
 from math import comb
+from typing import Optional
 
 import numpy as np
 
@@ -54,33 +55,63 @@ def _powers(y: np.ndarray, degree: int) -> np.ndarray:
     return pw
 
 
+def _embed_powers(pw: np.ndarray, degree: int) -> np.ndarray:
+    """``(R, M)`` monomials of ``degree`` from a power table ``(R, D, >= degree + 1)``."""
+    exps = exponents(pw.shape[1], degree)
+    # product over the variables in order: the same rounding as np.prod over a gathered
+    # (R, M, D) array, without building it
+    out = pw[:, 0, exps[:, 0]]
+    for j in range(1, pw.shape[1]):                 # D <= 6 variables
+        out = out * pw[:, j, exps[:, j]]
+    return out
+
+
 def embed(y: np.ndarray, degree: int) -> np.ndarray:
     """Veronese map ``nu_n``: rows ``(R, D)`` -> ``(R, M)`` monomials of ``degree``."""
     y = np.asarray(y, dtype=float)
-    exps = exponents(y.shape[1], degree)
-    pw = _powers(y, degree)                      # (R, D, n+1)
-    cols = np.arange(y.shape[1])
-    # gather y_j ** e_kj for every monomial k and variable j, multiply over j
-    return np.prod(pw[:, cols[None, :], exps], axis=2)
+    return _embed_powers(_powers(y, degree), degree)
 
 
-def gradient(y: np.ndarray, coeffs: np.ndarray, degree: int) -> np.ndarray:
+@lru_cache(maxsize=None)
+def _gradient_columns(n_vars: int, degree: int) -> np.ndarray:
+    """``(D, M)`` columns of ``[nu_n | nu_(n-1)]`` holding ``d/dy_j`` of every monomial / e_j.
+
+    Monomial ``k`` with ``e_kj > 0`` maps to ``y^(e_k - 1_j)`` (a degree n-1 monomial); with
+    ``e_kj = 0`` its weight is zero and it maps to itself (any finite value will do).
+    """
+    exps = exponents(n_vars, degree)
+    lower = {tuple(e): i for i, e in enumerate(exponents(n_vars, degree - 1))} if degree else {}
+    out = np.empty((n_vars, exps.shape[0]), dtype=np.int64)
+    for j in range(n_vars):
+        for k, e in enumerate(exps):                # built once per (D, n)
+            if e[j] > 0:
+                d = list(e)
+                d[j] -= 1
+                out[j, k] = exps.shape[0] + lower[tuple(d)]
+            else:
+                out[j, k] = k
+    out.setflags(write=False)
+    return out
+
+
+def gradient(y: np.ndarray, coeffs: np.ndarray, degree: int,
+             embedded: Optional[np.ndarray] = None) -> np.ndarray:
     """Gradient ``(R, D)`` of ``p(y) = nu_n(y) . coeffs`` at every row of ``y``.
 
-    ``d/dy_j prod_l y_l^e_l = e_j y_j^(e_j - 1) prod_{l != j} y_l^e_l``; computed for all rows,
-    monomials and variables at once.
+    ``d/dy_j prod_l y_l^e_l = e_j y_j^(e_j - 1) prod_{l != j} y_l^e_l``: the degree n-1
+    monomials, gathered per variable. ``embedded``: ``embed(y, degree)`` when already computed.
     """
     y = np.asarray(y, dtype=float)
     d = y.shape[1]
     exps = exponents(d, degree)                  # (M, D)
     pw = _powers(y, degree)                      # (R, D, n+1)
-    cols = np.arange(d)
+    if embedded is None:
+        embedded = _embed_powers(pw, degree)
+    both = np.concatenate([embedded, _embed_powers(pw, degree - 1)], axis=1)
+    cols = _gradient_columns(d, degree)
     grad = np.empty_like(y)
     for j in range(d):                           # D <= 6 variables, not a loop over rows/monomials
-        e = exps.copy()
-        e[:, j] = np.maximum(e[:, j] - 1, 0)
-        mono = np.prod(pw[:, cols[None, :], e], axis=2)          # (R, M)
-        grad[:, j] = mono @ (exps[:, j] * coeffs)
+        grad[:, j] = both[:, cols[j]] @ (exps[:, j] * coeffs)
     return grad
 
 
