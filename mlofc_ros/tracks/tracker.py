@@ -24,7 +24,8 @@ Per frame, vectorised over tracks and detections (no Python loop per line):
    whose prediction finds too little edge support, are carried by pyramidal Lucas-Kanade
    (``cv2.calcOpticalFlowPyrLK``) on ``n_points`` points, a TLS line fit to them (one outlier
    may be dropped, turns above ``max_turn_deg`` rejected; along the line only points with
-   2D texture count) and the same edge refinement.
+   2D texture count) and the same edge refinement; a new track whose KLT fit is rejected
+   is still carried when the refinement of that fit finds its edge.
 2. *Detect* on every ``detect_every``-th frame with a
    :class:`~mlofc_ros.segments.detect.LineDetector`.
 3. *Associate*: each detection joins the track (carried, or predicted when carrying failed)
@@ -441,7 +442,9 @@ class LineTracker:
         ``predict='velocity'``: tracks with a velocity are predicted by it and refined on the
         image edges; ``predict='klt'``: they are KLT-carried from the prediction first. Tracks
         without a velocity, or whose first attempt fails, are KLT-carried with the full
-        pyramid. Failed tracks get their constant-velocity prediction and ``ok = False``.
+        pyramid (tracks without a velocity also pass when the KLT fit fails but its edge
+        refinement succeeds). Failed tracks get their constant-velocity prediction and
+        ``ok = False``.
         """
         t_n = self._seg.shape[0]
         new = self._seg + self._vel
@@ -466,6 +469,9 @@ class LineTracker:
             ref2, ok3 = self._refine(image, seg2)
             # a good KLT fit stands on its own where the edge search finds too little support
             seg2 = np.where(ok3[:, None], ref2, seg2)
+            # a new track whose KLT fit fails (residual, turn) but whose refined line finds
+            # its edge is kept: coasting, it would die before the next detection
+            ok2 = ok2 | (ok3 & ~self._has_vel[sel])
             new[sel[ok2]] = seg2[ok2]
             ok[sel[ok2]] = True
         return new, ok
