@@ -214,8 +214,9 @@ class LineTracker:
       lines, distance of detection endpoints to the track's line, overlap along the line over
       the shorter segment's length). ``rescue_gate``: detections left unclaimed get a second,
       mutual-best association to the unmatched tracks with gates widened by this factor
-      (1 = off), so a track drifted slightly off its edge keeps its id (3 rather than 2:
-      a quarter fewer id switches on the rendered sequences, longer lives on the real ones).
+      (for carried and uncarried tracks alike; 1 = off), so a track drifted slightly off its
+      edge keeps its id (3 rather than 2: fewer id switches on the rendered sequences, longer
+      lives on the real ones).
     """
 
     def __init__(self, detector: Optional[LineDetector] = None, min_length: float = 20.0,
@@ -500,7 +501,9 @@ class LineTracker:
             ft = np.setdiff1d(np.arange(t_n), owner[owner >= 0])
             fd = np.nonzero(owner < 0)[0]
             if ft.size and fd.size:
-                c2 = self._cost(trk[ft], det[fd], np.where(loose[ft], 2.0, 1.0) * self.rescue_gate)
+                # rescue_gate replaces (does not multiply) the x2 of uncarried tracks: wider
+                # gates let detections of other edges in
+                c2 = self._cost(trk[ft], det[fd], np.full(ft.size, self.rescue_gate))
                 bt = np.argmin(c2, axis=0)
                 bd = np.argmin(c2, axis=1)
                 ok = np.isfinite(c2[bt, np.arange(fd.size)]) & (bd[bt] == np.arange(fd.size))
