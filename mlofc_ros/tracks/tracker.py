@@ -24,7 +24,8 @@ Per frame, vectorised over tracks and detections (no Python loop per line):
    whose prediction finds too little edge support, are carried by pyramidal Lucas-Kanade
    (``cv2.calcOpticalFlowPyrLK``) on ``n_points`` points, a TLS line fit to them (one outlier
    may be dropped, turns above ``max_turn_deg`` rejected; along the line only points with
-   2D texture count) and the same edge refinement.
+   2D texture count) and the same edge refinement; a new track whose KLT fit is rejected
+   is still carried when the refinement of that fit finds its edge.
 2. *Detect* on every ``detect_every``-th frame with a
    :class:`~mlofc_ros.segments.detect.LineDetector`.
 3. *Associate*: each detection joins the track (carried, or predicted when carrying failed)
@@ -213,7 +214,9 @@ class LineTracker:
       lines, distance of detection endpoints to the track's line, overlap along the line over
       the shorter segment's length). ``rescue_gate``: detections left unclaimed get a second,
       mutual-best association to the unmatched tracks with gates widened by this factor
-      (1 = off), so a track drifted slightly off its edge keeps its id.
+      (for carried and uncarried tracks alike; 1 = off), so a track drifted slightly off its
+      edge keeps its id (3 rather than 2: fewer id switches on the rendered sequences, longer
+      lives on the real ones).
     """
 
     def __init__(self, detector: Optional[LineDetector] = None, min_length: float = 20.0,
@@ -226,7 +229,7 @@ class LineTracker:
                  refine_inlier_px: float = 0.5, refine_min_relative: float = 0.3,
                  min_support: float = 0.4, predict: str = 'velocity', max_turn_deg: float = 12.0,
                  max_tracks: int = 2000, refine_polarity: bool = False,
-                 turn_smoothing: float = 0.3, rescue_gate: float = 2.0,
+                 turn_smoothing: float = 0.3, rescue_gate: float = 3.0,
                  klt_min_eig: float = 1e-2) -> None:
         if int(detect_every) < 1:
             raise ValueError(f'detect_every must be >= 1, got {detect_every}')
@@ -440,7 +443,9 @@ class LineTracker:
         ``predict='velocity'``: tracks with a velocity are predicted by it and refined on the
         image edges; ``predict='klt'``: they are KLT-carried from the prediction first. Tracks
         without a velocity, or whose first attempt fails, are KLT-carried with the full
-        pyramid. Failed tracks get their constant-velocity prediction and ``ok = False``.
+        pyramid (tracks without a velocity also pass when the KLT fit fails but its edge
+        refinement succeeds). Failed tracks get their constant-velocity prediction and
+        ``ok = False``.
         """
         t_n = self._seg.shape[0]
         new = self._seg + self._vel
@@ -465,6 +470,9 @@ class LineTracker:
             ref2, ok3 = self._refine(image, seg2)
             # a good KLT fit stands on its own where the edge search finds too little support
             seg2 = np.where(ok3[:, None], ref2, seg2)
+            # a new track whose KLT fit fails (residual, turn) but whose refined line finds
+            # its edge is kept: coasting, it would die before the next detection
+            ok2 = ok2 | (ok3 & ~self._has_vel[sel])
             new[sel[ok2]] = seg2[ok2]
             ok[sel[ok2]] = True
         return new, ok
@@ -493,7 +501,9 @@ class LineTracker:
             ft = np.setdiff1d(np.arange(t_n), owner[owner >= 0])
             fd = np.nonzero(owner < 0)[0]
             if ft.size and fd.size:
-                c2 = self._cost(trk[ft], det[fd], np.where(loose[ft], 2.0, 1.0) * self.rescue_gate)
+                # rescue_gate replaces (does not multiply) the x2 of uncarried tracks: wider
+                # gates let detections of other edges in
+                c2 = self._cost(trk[ft], det[fd], np.full(ft.size, self.rescue_gate))
                 bt = np.argmin(c2, axis=0)
                 bd = np.argmin(c2, axis=1)
                 ok = np.isfinite(c2[bt, np.arange(fd.size)]) & (bd[bt] == np.arange(fd.size))
