@@ -34,7 +34,6 @@ exists. Every runner of a section sees the same scenes (seeds fixed by section, 
 import argparse
 from dataclasses import dataclass
 import math
-import multiprocessing
 import os
 import pathlib
 import time
@@ -341,19 +340,8 @@ def run_tasks(tasks: Sequence[Task], jobs: int) -> Tuple[Raw, Dict[str, List[str
     """Run every task (``jobs`` worker processes); raw records per (section, key, runner)."""
     order = sorted(tasks, key=lambda t: -_cost(t))  # biggest first so the pool ends evenly
     t0 = time.perf_counter()
-    results = []
-    if jobs > 1 and len(order) >= 4 * jobs:
-        # forkserver, not fork: a process that has run rclpy (the test suite) holds DDS threads,
-        # and a forked child can deadlock on a lock one of them held
-        ctx = multiprocessing.get_context('forkserver' if os.name == 'posix' else 'spawn')
-        with ctx.Pool(jobs) as pool:
-            for i, res in enumerate(pool.imap_unordered(run_task, order, chunksize=2)):
-                results.append(res)
-                if (i + 1) % max(1, len(order) // 10) == 0:
-                    common.eprint(f'  {i + 1}/{len(order)} scenes, '
-                                  f'{time.perf_counter() - t0:.0f} s')
-    else:
-        results = [run_task(t) for t in order]
+    results = common.run_parallel(run_task, order, jobs if len(order) >= 4 * jobs else 1,
+                                  'scenes', chunksize=2)
     raw: Raw = {}
     errors: Dict[str, List[str]] = {}
     for task, out in results:

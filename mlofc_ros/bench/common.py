@@ -18,6 +18,7 @@ Everything here is free of ROS; matplotlib is imported lazily (Agg backend) by t
 import datetime
 import itertools
 import math
+import multiprocessing
 import os
 import pathlib
 import platform
@@ -274,6 +275,28 @@ def save_figure(fig: object, path: pathlib.Path, legend_ax: Optional[object] = N
         fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def run_parallel(fn: Callable[[object], object], items: Sequence[object], jobs: int,
+                 what: str = 'items', reports: int = 10, chunksize: int = 1) -> List[object]:
+    """Apply ``fn`` to every item, in ``jobs`` worker processes when ``jobs > 1``.
+
+    Results come in completion order (each carries what identifies it); progress goes to
+    stderr ``reports`` times. ``fn`` must be a module-level function (it is pickled).
+    """
+    if jobs <= 1 or len(items) <= 1:
+        return [fn(x) for x in items]
+    t0 = time.perf_counter()
+    out = []
+    # forkserver, not fork: a process that has run rclpy (the test suite) holds DDS threads,
+    # and a forked child can deadlock on a lock one of them held
+    ctx = multiprocessing.get_context('forkserver' if os.name == 'posix' else 'spawn')
+    with ctx.Pool(jobs) as pool:
+        for i, res in enumerate(pool.imap_unordered(fn, items, chunksize=chunksize)):
+            out.append(res)
+            if (i + 1) % max(1, len(items) // reports) == 0:
+                eprint(f'  {i + 1}/{len(items)} {what}, {time.perf_counter() - t0:.0f} s')
+    return out
 
 
 def eprint(*args: object) -> None:

@@ -34,7 +34,6 @@ at Fig. 2 settings, the robust and algebraic methods with unknown focal length.
 import argparse
 from dataclasses import dataclass
 import math
-import multiprocessing
 import os
 import time
 from typing import Dict, List, Optional, Sequence, Tuple
@@ -541,19 +540,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     common.eprint(f'paper: {len(units)} scenes, {sum(len(u.runners) for u in units)} solver '
                   f'calls, {args.jobs} process(es)')
     t0 = time.perf_counter()
-    results = []
-    if args.jobs > 1:
-        # forkserver, not fork: a process that has run rclpy (the test suite) holds DDS threads,
-        # and a forked child can deadlock on a lock one of them held
-        ctx = multiprocessing.get_context('forkserver' if os.name == 'posix' else 'spawn')
-        with ctx.Pool(args.jobs) as pool:
-            for i, res in enumerate(pool.imap_unordered(run_unit, units, chunksize=2)):
-                results.append(res)
-                if (i + 1) % max(1, len(units) // 20) == 0:
-                    common.eprint(f'  {i + 1}/{len(units)} scenes, '
-                                  f'{time.perf_counter() - t0:.0f} s')
-    else:
-        results = [run_unit(u) for u in units]
+    results = common.run_parallel(run_unit, units, args.jobs, 'scenes', reports=20,
+                                  chunksize=2)
     seconds = time.perf_counter() - t0
     stats, errors = aggregate(results)
     command = common.command_line('paper', argv)
