@@ -38,7 +38,6 @@ import argparse
 from dataclasses import dataclass
 import json
 import math
-import multiprocessing
 import os
 import pathlib
 import re
@@ -682,20 +681,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                   f'{len(units) * len(methods)} solver calls, {args.jobs} process(es)')
     solver = solver_state()
     t0 = time.perf_counter()
-    records: List[Dict[str, object]] = []
-    if args.jobs > 1 and len(units) > 1:
-        # forkserver, not fork: a process that has run rclpy (the test suite) holds DDS threads,
-        # and a forked child can deadlock on a lock one of them held
-        ctx = multiprocessing.get_context('forkserver' if os.name == 'posix' else 'spawn')
-        with ctx.Pool(args.jobs) as pool:
-            for i, recs in enumerate(pool.imap_unordered(run_unit, units)):
-                records += recs
-                if (i + 1) % max(1, len(units) // 20) == 0:
-                    common.eprint(f'  {i + 1}/{len(units)} windows, '
-                                  f'{time.perf_counter() - t0:.0f} s')
-    else:
-        for unit in units:
-            records += run_unit(unit)
+    records: List[Dict[str, object]] = [
+        r for recs in common.run_parallel(run_unit, units, args.jobs, 'windows', reports=20)
+        for r in recs]
     seconds = time.perf_counter() - t0
     command = _shown(common.command_line('hopkins', argv))
     if args.save_records:
