@@ -354,10 +354,11 @@ def _truth_cheaper_text(seqs) -> str:
     share = ', '.join(f"{_stat(seqs, k, 'robust', lambda *_: True, 'truth_cheaper')['mean']:.0f} %"
                       f' (K = {k})' for k in FRAMES)
     return ("Search or model? At robust's focal length and noise level, bodies fitted to the "
-            "TRUE groups have a lower truncated cost than robust's own answer in only "
-            f'{share} of the windows (mean over sequences). Elsewhere the rotation-only '
-            'objective itself prefers a wrong grouping (translation), so a better search would '
-            'not help; a better model or a prior would.\n')
+            "TRUE groups have a lower truncated cost than robust's own answer in "
+            f'{share} of the windows (mean over sequences): there the search, or the spatial '
+            'prior (which trades cost for coherence), ends above the truth. In the other '
+            'windows the rotation-only objective itself prefers a wrong grouping (bodies that '
+            'translate), which no search can fix; a richer model or a prior can.\n')
 
 
 def group_table(seqs, methods: Sequence[str], k: int) -> str:
