@@ -172,7 +172,7 @@ def _oracle(tracks: np.ndarray, labels: np.ndarray, n: int, size: Tuple[int, int
 
 def _robust_diagnostics(tracks: np.ndarray, labels: np.ndarray, seq, res
                         ) -> Tuple[np.ndarray, float]:
-    """Labels with a looser outlier bound; does the true grouping cost less than the answer?
+    """Labels with a looser outlier bound, and whether the true grouping costs less.
 
     Both at robust's focal length and noise level. The second is 1.0 when the truncated
     cost of bodies fitted to the TRUE groups is below that of robust's own answer (then the
