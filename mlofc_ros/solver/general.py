@@ -290,15 +290,7 @@ def general_segmentation(obs: LineObservations, n: int, starts: list,
         cap = None
         costs = np.full((obs.n_tracks, n), np.nan)
         for _ in range(iterations):
-            for b in range(n):                               # bodies, not lines
-                idx = np.flatnonzero(lab == b)
-                if idx.size < 3:
-                    continue
-                if fitted[b]:
-                    W[b], T[b], _ = fit_body(obs, idx, W[b], T[b], 6)
-                else:
-                    W[b], T[b], _ = fit_body_multistart(obs, idx, w_starts[b % len(w_starts)])
-                    fitted[b] = True
+            _fit_each_body(obs, lab, W, T, fitted, 6, lambda b: w_starts[b % len(w_starts)])
             costs = general_costs(obs, W, T)
             sigma2 = _robust_sigma2(_best_costs(costs), dof)
             cap = chi2_quantile(outlier_p, dof) * sigma2
@@ -317,6 +309,24 @@ def general_segmentation(obs: LineObservations, n: int, starts: list,
             best['W'][b], best['T'][b], _ = fit_body(obs, idx, best['W'][b], best['T'][b], 40)
     best['costs'] = general_costs(obs, best['W'], best['T'])
     return best
+
+
+def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
+                   fitted: np.ndarray, iterations: int, w_start) -> None:
+    """Refit every body with >= 3 tracks in place: LM from its motion, or multi-start.
+
+    ``fitted (n,)`` marks bodies whose ``(W, T)`` is a fit already (LM for ``iterations``);
+    the others start a multi-start search at ``w_start(b)`` and become fitted.
+    """
+    for b in range(W.shape[0]):                               # bodies, not lines
+        idx = np.flatnonzero(labels == b)
+        if idx.size < 3:
+            continue
+        if fitted[b]:
+            W[b], T[b], _ = fit_body(obs, idx, W[b], T[b], iterations)
+        else:
+            W[b], T[b], _ = fit_body_multistart(obs, idx, w_start(b))
+            fitted[b] = True
 
 
 #: A warm start is kept when at least this share of the usable tracks stay inliers (else the
@@ -357,15 +367,7 @@ def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: 
     costs = np.full((obs.n_tracks, n), np.nan)
     sigma2, cap = 1.0, None
     for _ in range(rounds):
-        for b in range(n):                                   # bodies, not lines
-            idx = np.flatnonzero(lab == b)
-            if idx.size < 3:
-                continue
-            if fitted[b]:
-                W[b], T[b], _ = fit_body(obs, idx, W[b], T[b], iterations)
-            else:
-                W[b], T[b], _ = fit_body_multistart(obs, idx, W[b])
-                fitted[b] = True
+        _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b])
         costs = general_costs(obs, W, T)
         if not np.any(np.isfinite(costs)):
             break
