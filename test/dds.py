@@ -22,10 +22,11 @@ from rcl_interfaces.srv import GetParameters, SetParameters
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile
-from sensor_msgs.msg import Image
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from sensor_msgs.msg import CameraInfo, Image
 
 from mlofc_ros.image.decode import gray_to_image_fields
+from mlofc_ros.ros_messages import stamp_to_seconds
 
 FRAME_ID = 'camera_optical_frame'
 
@@ -75,6 +76,21 @@ class DdsHarness:
         self.node.create_subscription(msg_type, topic, cb, qos or QoSProfile(depth=100))
         return box
 
+    def camera_publishers(self, ns: str, timeout: float = None):
+        """Create publishers of ``{ns}/image`` and ``{ns}/camera_info`` (sensor-data QoS).
+
+        Returned once the node under test (``{ns}/mlofc``) subscribes to both and publishes
+        ``~/segments``.
+        """
+        image_pub = self.node.create_publisher(Image, f'{ns}/image', qos_profile_sensor_data)
+        info_pub = self.node.create_publisher(CameraInfo, f'{ns}/camera_info',
+                                              qos_profile_sensor_data)
+        assert self.wait(lambda: image_pub.get_subscription_count() == 1
+                         and info_pub.get_subscription_count() == 1
+                         and self.node.count_publishers(f'{ns}/mlofc/segments') == 1,
+                         timeout), 'node did not come up'
+        return image_pub, info_pub
+
     def wait(self, pred: Callable[[], bool], timeout: float = None) -> bool:
         end = time.monotonic() + (self.timeout if timeout is None else timeout)
         while time.monotonic() < end:
@@ -114,4 +130,4 @@ class DdsHarness:
 
 def stamp_of(msg) -> float:
     """Header stamp of ``msg`` in seconds, rounded to the microsecond (for comparisons)."""
-    return round(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, 6)
+    return round(stamp_to_seconds(msg.header.stamp), 6)

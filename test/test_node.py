@@ -164,12 +164,7 @@ def test_in_process_two_boxes_one_cloud_per_image_and_accuracy(ros):
         twists = {i: h.collect(TwistWithCovarianceStamped, f'/inproc/mlofc/body_{i}/twist')
                   for i in range(3)}
         debug = h.collect(Image, '/inproc/mlofc/debug_image')
-        pub = h.node.create_publisher(Image, '/inproc/image', qos_profile_sensor_data)
-        cam_pub = h.node.create_publisher(CameraInfo, '/inproc/camera_info',
-                                          qos_profile_sensor_data)
-        assert h.wait(lambda: pub.get_subscription_count() == 1
-                      and cam_pub.get_subscription_count() == 1
-                      and h.node.count_publishers('/inproc/mlofc/segments') == 1)
+        pub, cam_pub = h.camera_publishers('/inproc')
         send_frames(h, pub, seq.frames, seq.stamps, clouds, cam_pub, seq.camera)
         h.wait(lambda: len(debug) >= len(seq.frames)
                and all(len(t) >= len(seq.frames) - 1 for t in twists.values()), 5.0)
@@ -215,12 +210,7 @@ def test_in_process_bad_input_queue_drops_and_parameter_changes(ros):
     h = Harness(node)
     try:
         clouds = h.collect(PointCloud2, '/robust/mlofc/segments')
-        pub = h.node.create_publisher(Image, '/robust/image', qos_profile_sensor_data)
-        cam_pub = h.node.create_publisher(CameraInfo, '/robust/camera_info',
-                                          qos_profile_sensor_data)
-        assert h.wait(lambda: pub.get_subscription_count() == 1
-                      and cam_pub.get_subscription_count() == 1
-                      and h.node.count_publishers('/robust/mlofc/segments') == 1)
+        pub, cam_pub = h.camera_publishers('/robust')
         # a bad image: warned about and skipped, the node keeps going
         bad = image_msg(seq.frames[0], 0.0)
         bad.encoding = 'no_such_encoding'

@@ -29,8 +29,7 @@ import numpy as np
 import pytest
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
-from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile,
-                       ReliabilityPolicy)
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from test_pipeline import small_sequence
 
@@ -59,15 +58,8 @@ class Harness(DdsHarness):
         self.node.create_subscription(Log, '/rosout', self._on_log, LOG_QOS)
         self._log_name = name
         self.clouds = self.collect(PointCloud2, f'{self.ns}/mlofc/segments')
-        self.image_pub = self.node.create_publisher(Image, f'{self.ns}/image',
-                                                    qos_profile_sensor_data)
-        self.info_pub = self.node.create_publisher(CameraInfo, f'{self.ns}/camera_info',
-                                                   qos_profile_sensor_data)
         self.start()
-        assert self.wait(lambda: self.image_pub.get_subscription_count() == 1
-                         and self.info_pub.get_subscription_count() == 1
-                         and self.node.count_publishers(f'{self.ns}/mlofc/segments') == 1,
-                         20.0), 'node did not come up'
+        self.image_pub, self.info_pub = self.camera_publishers(self.ns, 20.0)
 
     def _on_log(self, msg: Log) -> None:
         if msg.name == self._log_name:
