@@ -183,14 +183,13 @@ def _robust_diagnostics(tracks: np.ndarray, labels: np.ndarray, seq, res
     from mlofc_ros.solver.models import chi2_quantile, fit_bodies, track_costs
     from mlofc_ros.solver.robust import OUTLIER_P
 
-    ok = np.isfinite(tracks[..., 0])
-    dof = 2.0 * np.sum(ok[:, :-1] & ok[:, 1:], axis=1)
-    cap = chi2_quantile(OUTLIER_P, dof) * float(res.info['sigma_px']) ** 2
-    costs = np.where(np.isfinite(res.costs), res.costs, np.inf)
-    loose = np.where(np.min(costs, axis=1) <= LOOSE_BOUND * cap, np.argmin(costs, axis=1), -1)
     w, h = seq.image_size
     f = float(res.focal_length)
     flows = line_flows(tracks, (f, f, w / 2.0, h / 2.0))
+    cap = (chi2_quantile(OUTLIER_P, 2.0 * flows.pairs_per_track())
+           * float(res.info['sigma_px']) ** 2)
+    costs = np.where(np.isfinite(res.costs), res.costs, np.inf)
+    loose = np.where(np.min(costs, axis=1) <= LOOSE_BOUND * cap, np.argmin(costs, axis=1), -1)
     c, _ = fit_bodies(flows, labels, seq.n_motions)
     truth = track_costs(flows, c, weighted=True)
     cheaper = total_cost(truth, assign(truth, cap), cap) < total_cost(res.costs, res.labels, cap)

@@ -278,8 +278,7 @@ def general_segmentation(obs: LineObservations, n: int, starts: list,
     translation directions (per frame, camera frame; zero when undetermined), ``costs (N, n)``,
     ``sigma2`` and the winning ``start``.
     """
-    from .ksubspaces import assign, total_cost
-    from .models import chi2_quantile
+    from .ksubspaces import total_cost
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
     usable = dof > 0
     best = None
@@ -292,9 +291,7 @@ def general_segmentation(obs: LineObservations, n: int, starts: list,
         for _ in range(iterations):
             _fit_each_body(obs, lab, W, T, fitted, 6, lambda b: w_starts[b % len(w_starts)])
             costs = general_costs(obs, W, T)
-            sigma2 = _robust_sigma2(_best_costs(costs), dof)
-            cap = chi2_quantile(outlier_p, dof) * sigma2
-            new = assign(costs, cap)
+            sigma2, cap, new = _assign_within_bound(costs, dof, outlier_p)
             if np.array_equal(new, lab):
                 break
             lab = new
@@ -309,6 +306,16 @@ def general_segmentation(obs: LineObservations, n: int, starts: list,
             best['W'][b], best['T'][b], _ = fit_body(obs, idx, best['W'][b], best['T'][b], 40)
     best['costs'] = general_costs(obs, best['W'], best['T'])
     return best
+
+
+def _assign_within_bound(costs: np.ndarray, dof: np.ndarray, outlier_p: float
+                         ) -> Tuple[float, np.ndarray, np.ndarray]:
+    """Noise level, chi-square outlier bound ``(N,)`` and labels (``-1`` above it) of ``costs``."""
+    from .ksubspaces import assign
+    from .models import chi2_quantile
+    sigma2 = _robust_sigma2(_best_costs(costs), dof)
+    cap = chi2_quantile(outlier_p, dof) * sigma2
+    return sigma2, cap, assign(costs, cap)
 
 
 def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
@@ -356,8 +363,7 @@ def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: 
     Returns the dict of :func:`general_segmentation` (``start='warm'``) plus ``inliers``, the
     share of usable tracks within the outlier bound.
     """
-    from .ksubspaces import assign, total_cost
-    from .models import chi2_quantile
+    from .ksubspaces import total_cost
     n = W0.shape[0]
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
     usable = dof > 0
@@ -371,9 +377,7 @@ def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: 
         costs = general_costs(obs, W, T)
         if not np.any(np.isfinite(costs)):
             break
-        sigma2 = _robust_sigma2(_best_costs(costs), dof)
-        cap = chi2_quantile(outlier_p, dof) * sigma2
-        new = assign(costs, cap)
+        sigma2, cap, new = _assign_within_bound(costs, dof, outlier_p)
         if np.array_equal(new, lab):
             break
         lab = new
