@@ -23,21 +23,23 @@ image, is usually body 0; body ``i`` keeps its id while it is seen.
 """
 import functools
 import itertools
+import math
 from typing import Dict, Optional, Tuple
 
 import numpy as np
 
-#: Largest number of bodies solved by exhaustive search (8! = 40320 permutations).
-MAX_EXACT = 8
+#: Largest number of candidate assignments searched exhaustively (8! = 40320).
+MAX_EXACT = 40320
 
 
-@functools.lru_cache(maxsize=MAX_EXACT + 1)
-def _permutations(k: int) -> np.ndarray:
-    return np.array(list(itertools.permutations(range(k))), dtype=np.intp).reshape(-1, k)
+@functools.lru_cache(maxsize=None)
+def _permutations(k: int, r: int) -> np.ndarray:
+    """``(k! / (k - r)!, r)``: every injective map of ``r`` rows into ``k`` columns, in order."""
+    return np.array(list(itertools.permutations(range(k), r)), dtype=np.intp).reshape(-1, r)
 
 
 def assign(score: np.ndarray) -> np.ndarray:
-    """Maximum-score assignment of rows to columns (exact for ``max(shape) <= 8``).
+    """Maximum-score assignment of rows to columns (exact up to 8 bodies and ids, or more).
 
     Parameters
     ----------
@@ -50,20 +52,21 @@ def assign(score: np.ndarray) -> np.ndarray:
         Column of every row, all distinct; columns ``>= C`` are new ones (when ``R > C``).
         Ties go to the lexicographically smallest assignment (identity first).
 
-    Larger problems fall back to a greedy assignment.
+    Problems with more than :data:`MAX_EXACT` candidate assignments fall back to a greedy one.
     """
     score = np.asarray(score, dtype=float)
     r, c = score.shape
     k = max(r, c)
-    if k == 0:
+    if r == 0:
         return np.zeros(0, dtype=np.intp)
     full = np.zeros((k, k))
     full[:r, :c] = np.nan_to_num(score, nan=0.0, posinf=0.0, neginf=0.0)
-    if k <= MAX_EXACT:
-        perms = _permutations(k)
-        totals = full[np.arange(k), perms].sum(axis=1)
-        best = perms[int(np.argmax(totals))]
-        return best[:r].copy()
+    if math.perm(k, r) <= MAX_EXACT:
+        # only the rows' columns matter: k! / (k - r)! maps, not k! (1680, not 40320, for 4
+        # bodies and 8 stable ids); lexicographic order keeps the tie rule
+        perms = _permutations(k, r)
+        totals = full[np.arange(r), perms].sum(axis=1)
+        return perms[int(np.argmax(totals))].copy()
     out = np.full(k, -1, dtype=np.intp)  # greedy: best pair first
     work = full.copy()
     for _ in range(k):

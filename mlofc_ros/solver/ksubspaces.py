@@ -24,14 +24,14 @@ def assign(costs: np.ndarray, threshold: Optional[np.ndarray] = None) -> np.ndar
 
     ``-1`` for unusable tracks (nan) and above ``threshold (N,)`` when given (outliers).
     """
-    ok = np.isfinite(costs).all(axis=1)
-    labels = np.full(costs.shape[0], -1, dtype=np.int64)
     if costs.shape[1] == 0:
-        return labels
-    labels[ok] = np.argmin(costs[ok], axis=1)
+        return np.full(costs.shape[0], -1, dtype=np.int64)
+    ok = np.isfinite(costs).all(axis=1)
+    labels = np.argmin(np.where(ok[:, None], costs, 0.0), axis=1)
     if threshold is not None:
-        best = np.where(ok, np.min(np.where(ok[:, None], costs, 0.0), axis=1), np.inf)
+        best = costs[np.arange(costs.shape[0]), labels]
         labels[best > threshold] = -1
+    labels[~ok] = -1
     return labels
 
 

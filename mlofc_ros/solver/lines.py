@@ -200,6 +200,9 @@ class LineFlows:
     b: np.ndarray            # (P, 2)
     Mw: np.ndarray           # (P, 2, 3) M whitened per track (see :func:`whiten_tracks`)
     bw: np.ndarray           # (P, 2)    b whitened per track
+    # (N, 2 (K-1), 4): every track's whitened rows [Mw, -bw] by frame-pair slot, zero rows for
+    # missing pairs, so that a track's exact cost is |rows @ [c ; 1]|^2 in one product
+    track_rows: np.ndarray
     # derived per-track quantities computed once (the arrays above are never modified):
     # 'pairs' (N,) and the TrackStats of :func:`.models.track_stats` by weighting
     cache: dict = field(default_factory=dict, repr=False, compare=False)
@@ -249,14 +252,19 @@ def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
     M = -Et @ skew(mbar)
     b = np.einsum('pjk,pk->pj', Et, m1 - m0)
     cov0, cov1 = cov[ti, ki], cov[ti, ki + 1]
-    Mw, bw = whiten_tracks(tracks.shape[0], tracks.shape[1] - 1, ti, ki, E, cov0, cov1, M, b)
-    return LineFlows(tracks.shape[0], ti, m0, m1, cov0, cov1, E, M, b, Mw, bw)
+    Mw, bw, rows = whiten_tracks(tracks.shape[0], tracks.shape[1] - 1, ti, ki, E, cov0, cov1,
+                                 M, b)
+    return LineFlows(tracks.shape[0], ti, m0, m1, cov0, cov1, E, M, b, Mw, bw, rows)
 
 
 def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E: np.ndarray,
                   cov0: np.ndarray, cov1: np.ndarray, M: np.ndarray, b: np.ndarray
-                  ) -> Tuple[np.ndarray, np.ndarray]:
+                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Whiten every track's stacked residuals ``r = M c - b`` with their full covariance.
+
+    Returns ``Mw (P, 2, 3)`` and ``bw (P, 2)`` per frame pair, and the same as rows
+    ``[Mw, -bw]`` per track ``(N, 2 (K-1), 4)`` with zero rows where a pair is missing (its
+    slot is uncorrelated with the others, so its whitened rows stay zero).
 
     Consecutive frame pairs of a track share a frame, so their residuals are correlated
     (``Cov(r_t, r_t+1) = -E_t^T S_m(t+1) E_t+1``): the covariance of a track's ``2 (K-1)``
@@ -268,10 +276,11 @@ def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E
     """
     d = 2 * n_slots
     slot = ki
-    cov = np.zeros((n_tracks, n_slots, n_slots, 2, 2))
-    cov[:, np.arange(n_slots), np.arange(n_slots)] = np.eye(2)       # missing pairs: unit
+    full = np.zeros((n_tracks, d, d))
+    full[:, np.arange(d), np.arange(d)] = 1.0                         # missing pairs: unit
+    cov = full.reshape(n_tracks, n_slots, 2, n_slots, 2)             # a view: 2x2 blocks
     Et = np.swapaxes(E, 1, 2)
-    cov[ti, slot, slot] = Et @ (cov0 + cov1) @ E
+    cov[ti, slot, :, slot] = Et @ (cov0 + cov1) @ E
     # pairs (t, t+1) and (t+1, t+2) of the same track share frame t+1
     lookup = np.full((n_tracks, n_slots + 1), -1)
     lookup[ti, slot] = np.arange(ti.size)
@@ -279,16 +288,16 @@ def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E
     has = nxt >= 0
     p, q = np.flatnonzero(has), nxt[has]
     off = -(Et[p] @ cov1[p] @ E[q])
-    cov[ti[p], slot[p], slot[q]] = off
-    cov[ti[p], slot[q], slot[p]] = np.swapaxes(off, 1, 2)
-    full = cov.transpose(0, 1, 3, 2, 4).reshape(n_tracks, d, d)
+    cov[ti[p], slot[p], :, slot[q]] = off
+    cov[ti[p], slot[q], :, slot[p]] = np.swapaxes(off, 1, 2)
     stacked = np.zeros((n_tracks, n_slots, 2, 4))
     stacked[ti, slot, :, :3] = M
     stacked[ti, slot, :, 3] = b
     L = np.linalg.cholesky(full)
-    white = np.linalg.solve(L, stacked.reshape(n_tracks, d, 4)).reshape(n_tracks, n_slots, 2, 4)
-    white = white[ti, slot]
-    return white[..., :3], white[..., 3]
+    rows = np.linalg.solve(L, stacked.reshape(n_tracks, d, 4))
+    white = rows.reshape(n_tracks, n_slots, 2, 4)[ti, slot]
+    rows[..., 3] *= -1.0
+    return white[..., :3], white[..., 3], rows
 
 
 def first_midpoints(tracks: np.ndarray) -> np.ndarray:

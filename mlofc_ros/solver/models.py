@@ -59,7 +59,13 @@ def track_stats(flows: LineFlows, weighted: bool = True) -> TrackStats:
 
 
 def _track_stats(flows: LineFlows, weighted: bool) -> TrackStats:
-    M, b = (flows.Mw, flows.bw) if weighted else (flows.M, flows.b)
+    if weighted:
+        # the 4x4 Gram matrix of every track's whitened rows holds A, g and k at once
+        rows = flows.track_rows
+        gram = np.matmul(np.swapaxes(rows, 1, 2), rows)
+        return TrackStats(gram[:, :3, :3], -gram[:, :3, 3], gram[:, 3, 3],
+                          flows.pairs_per_track() > 0, True)
+    M, b = flows.M, flows.b
     n, pt = flows.n_tracks, flows.pair_track
     A = sum_by_track(np.einsum('pji,pjk->pik', M, M), pt, n)
     g = sum_by_track(np.einsum('pji,pj->pi', M, b), pt, n)
@@ -135,7 +141,14 @@ def track_costs(flows: LineFlows, c: np.ndarray, weighted: bool = True) -> np.nd
 
     Tracks with no frame pair get ``nan``.
     """
-    out = sum_by_track(pair_costs(flows, c, weighted), flows.pair_track, flows.n_tracks)
+    if weighted:
+        # one product over every track's whitened rows (zero where a pair is missing)
+        c = np.atleast_2d(np.asarray(c, dtype=float))
+        u = np.concatenate([c, np.ones((c.shape[0], 1))], axis=1)
+        r = flows.track_rows @ u.T                                  # (N, 2 (K-1), n)
+        out = np.einsum('ndh,ndh->nh', r, r)
+    else:
+        out = sum_by_track(pair_costs(flows, c, weighted), flows.pair_track, flows.n_tracks)
     out[flows.pairs_per_track() == 0] = np.nan
     return out
 
