@@ -214,10 +214,14 @@ class BodyTracker:
                               minlength=n * slots).astype(float).reshape(n, slots)
         overlap /= np.maximum(overlap.sum(axis=1, keepdims=True), 1.0)
         sim = np.zeros((n, slots))
-        for s, ws in self._omegas.items():   # <= 8 slots
-            d = np.linalg.norm(w - ws, axis=1)
-            scale = np.linalg.norm(w, axis=1) + np.linalg.norm(ws) + 1e-9
-            sim[:, s] = np.where(valid, np.clip(1.0 - d / scale, 0.0, 1.0), 0.0)
+        if self._omegas:
+            known = np.fromiter(self._omegas, dtype=np.intp)
+            ws = np.stack(list(self._omegas.values()))                   # (slots known, 3)
+            d = np.sqrt(np.sum((w[:, None, :] - ws[None]) ** 2, axis=2))
+            scale = (np.sqrt(np.sum(w * w, axis=1))[:, None]
+                     + np.sqrt(np.sum(ws * ws, axis=1))[None, :] + 1e-9)
+            sim[:, known] = np.where(valid[:, None],
+                                     np.minimum(np.maximum(1.0 - d / scale, 0.0), 1.0), 0.0)
         return overlap + self.omega_weight * sim
 
     def _remember(self, ids: np.ndarray, lab: np.ndarray, w: np.ndarray, valid: np.ndarray,
