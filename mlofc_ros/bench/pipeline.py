@@ -313,7 +313,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
                    'detect/track / LSD', 'solve share', 'process mean ms', 'LSD mean ms',
                    'process / LSD (means)'], rows),
               f'Statistics over frames >= {skip} (the first `window` frames fill the window). '
-              'Ratios are of medians unless marked means. `process` is `Pipeline.process` (`timings["total"]`); CPU '
+              'Ratios are of medians unless marked means. `process` is `Pipeline.process` '
+              '(`timings["total"]`); CPU '
               'columns are the same calls timed with `time.thread_time` (the machine is shared: '
               'wall time includes waiting for a core). Solve share = median solve / median '
               'process.', '',
