@@ -25,6 +25,13 @@ frame has, in frame ``k``, the moment ``n_k = R^k n0 + T_k x R^k v0`` with
 ``n0`` whose smallest eigenvalue is the line's (whitened) residual: ``2K - 4`` constraints per
 line, none with two frames (as it must be), six with five. With ``T = 0`` it reduces to the
 rotation-only model. Per body, ``(w, T)`` are found by Levenberg-Marquardt on these residuals.
+
+Fitting the two direction unknowns per line removes all first-order information (the
+translational flow spans the line's whole flow space), which leaves bodies nearly
+indistinguishable over a few frames. The segmentation therefore uses
+:func:`marginal_residuals`: the direction gets a Gaussian prior scaled by the body's
+translation and is integrated out (:func:`general_search`, :func:`marginal_segmentation`;
+docs/design.md).
 """
 from typing import Optional, Tuple
 
@@ -355,78 +362,14 @@ def _robust_sigma2(best: np.ndarray, dof: np.ndarray) -> float:
     return float(max(np.median(best[ok] / chi2_quantile(0.5, dof[ok])), SIGMA_FLOOR_PX ** 2))
 
 
-def general_segmentation(obs: LineObservations, n: int, starts: list,
-                         w_starts: np.ndarray, iterations: int = 8,
-                         outlier_p: float = 0.9999,
-                         neighbours: Optional[np.ndarray] = None) -> dict:
-    """Segment tracks into ``n`` general rigid motions (tracks need >= 3 frames).
-
-    Parameters
-    ----------
-    obs : LineObservations
-    n : int
-        Number of bodies.
-    starts : list of (name, labels (N,))
-        Initial labellings, e.g. the rotation-only solution and a spatial clustering.
-    w_starts : (n, 3)
-        Rotation (rad/frame) to start every body's fit from in the first round (the
-        rotation-only estimate of its lines is a good start; T is searched from six axes).
-    neighbours : (N, k) int, optional
-        Image neighbours (:func:`.spatial.spatial_neighbours`): every assignment is then
-        smoothed by the spatial prior of :func:`.spatial.smooth_labels`.
-
-    Returns
-    -------
-    dict with ``labels (N,)``, ``W (n, 3)`` rotation vectors (rad/frame), ``T (n, 3)`` unit
-    translation directions (per frame, camera frame; zero when undetermined), ``costs (N, n)``,
-    ``sigma2`` and the winning ``start``.
-    """
-    from .ksubspaces import total_cost
-    dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
-    usable = dof > 0
-    best = None
-    for name, lab in starts:
-        lab = np.where(usable, np.asarray(lab, dtype=np.int64), -1)
-        W, T = np.zeros((n, 3)), np.zeros((n, 3))
-        fitted = np.zeros(n, dtype=bool)
-        cap = None
-        costs = np.full((obs.n_tracks, n), np.nan)
-        for _ in range(iterations):
-            _fit_each_body(obs, lab, W, T, fitted, 6, lambda b: w_starts[b % len(w_starts)])
-            costs = general_costs(obs, W, T)
-            sigma2, cap, new = _assign_within_bound(costs, dof, outlier_p, neighbours)
-            if np.array_equal(new, lab):
-                break
-            lab = new
-        score = total_cost(costs, lab, cap)
-        if best is None or score < best['score']:
-            best = {'labels': lab, 'W': W.copy(), 'T': T.copy(), 'costs': costs,
-                    'sigma2': sigma2, 'start': name, 'score': score}
-    # polish the winner: the alternation above stops LM early to save time
-    for b in range(n):
-        idx = np.flatnonzero(best['labels'] == b)
-        if idx.size >= 3:
-            best['W'][b], best['T'][b], _ = fit_body(obs, idx, best['W'][b], best['T'][b], 40)
-    best['costs'] = general_costs(obs, best['W'], best['T'])
-    return best
-
-
-def _assign_within_bound(costs: np.ndarray, dof: np.ndarray, outlier_p: float,
-                         neighbours: Optional[np.ndarray] = None
+def _assign_within_bound(costs: np.ndarray, dof: np.ndarray, outlier_p: float
                          ) -> Tuple[float, np.ndarray, np.ndarray]:
-    """Noise level, chi-square outlier bound ``(N,)`` and labels (``-1`` above it) of ``costs``.
-
-    With ``neighbours`` the inliers are relabelled by :func:`.spatial.smooth_labels`.
-    """
+    """Noise level, chi-square outlier bound ``(N,)`` and labels (``-1`` above it) of ``costs``."""
     from .ksubspaces import assign
     from .models import chi2_quantile
-    from .spatial import smooth_labels
     sigma2 = _robust_sigma2(_best_costs(costs), dof)
     cap = chi2_quantile(outlier_p, dof) * sigma2
-    lab = assign(costs, cap)
-    if neighbours is not None:
-        lab, _ = smooth_labels(costs, lab, neighbours)
-    return sigma2, cap, lab
+    return sigma2, cap, assign(costs, cap)
 
 
 def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
@@ -513,7 +456,11 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
     neighbours : (N, k) int, optional
         Image neighbours for the spatial prior of :func:`.spatial.smooth_labels`.
 
-    Returns the dict of :func:`general_segmentation`, ``T`` with its scale.
+    Returns
+    -------
+    dict with ``labels (N,)``, ``W (n, 3)`` rotation vectors (rad/frame), ``T (n, 3)``
+    translations per frame (camera frame; length = the scale of ``|T| / d``), ``costs (N, n)``,
+    ``sigma2``, the winning ``start`` and its ``score`` (capped total cost).
     """
     from .ksubspaces import total_cost
     dof = np.maximum(2.0 * obs.frames - 2.0, 0.0)
@@ -606,7 +553,8 @@ def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: 
     rounds, iterations : int
         Fit/assign rounds and LM iterations per body and round.
 
-    Returns the dict of :func:`general_segmentation` (``start='warm'``) plus ``inliers``, the
+    Returns the dict of :func:`marginal_segmentation` (``start='warm'``, fitted directions, unit
+    ``T``) plus ``inliers``, the
     share of usable tracks within the outlier bound.
     """
     from .ksubspaces import total_cost
