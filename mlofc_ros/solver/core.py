@@ -309,7 +309,8 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
                 # the warm fits (fitted directions) give the noise level and the starts
                 sol = marginal_segmentation(obs, n, [('warm', warm['labels'])], warm['W'],
                                             warm['T'], NOISE_FACTOR * warm['sigma2'],
-                                            rounds=3, iterations=4, neighbours=neighbours)
+                                            rounds=2, iterations=4, neighbours=neighbours,
+                                            keep=1, first_iterations=4)
     if sol is None:
         starts = [('rotation-only', rot.labels), ('spatial', spatial_labels(arr, n, rng))]
         if init_labels is not None:

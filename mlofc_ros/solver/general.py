@@ -374,12 +374,14 @@ def _assign_within_bound(costs: np.ndarray, dof: np.ndarray, outlier_p: float
 
 def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
                    fitted: np.ndarray, iterations: int, w_start,
-                   sigma2: Optional[float] = None, t_start=None) -> None:
+                   sigma2: Optional[float] = None, t_start=None, keep: int = 3,
+                   first_iterations: int = 15) -> None:
     """Refit every body with >= 3 tracks in place: LM from its motion, or multi-start.
 
     ``fitted (n,)`` marks bodies whose ``(W, T)`` is a fit already (LM for ``iterations``);
     the others start a multi-start search at ``w_start(b)`` (and ``t_start(b)``) and become
-    fitted. ``sigma2``: marginalised directions (:func:`marginal_residuals`).
+    fitted (``keep`` LM runs of ``first_iterations``). ``sigma2``: marginalised directions
+    (:func:`marginal_residuals`).
     """
     for b in range(W.shape[0]):                               # bodies, not lines
         idx = np.flatnonzero(labels == b)
@@ -389,7 +391,8 @@ def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: 
             W[b], T[b], _ = fit_body(obs, idx, W[b], T[b], iterations, sigma2)
         else:
             W[b], T[b], _ = fit_body_multistart(
-                obs, idx, w_start(b), None if t_start is None else t_start(b), sigma2=sigma2)
+                obs, idx, w_start(b), None if t_start is None else t_start(b),
+                first_iterations, keep, sigma2)
             fitted[b] = True
 
 
@@ -437,8 +440,8 @@ def _assign_marginal(costs: np.ndarray, logdet: np.ndarray, dof: np.ndarray, sig
 
 def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.ndarray,
                           T0: np.ndarray, sigma2: float, rounds: int = 8, iterations: int = 5,
-                          outlier_p: float = 0.9999,
-                          neighbours: Optional[np.ndarray] = None) -> dict:
+                          outlier_p: float = 0.9999, neighbours: Optional[np.ndarray] = None,
+                          keep: int = 3, first_iterations: int = 15) -> dict:
     """Segment with the marginalised-direction model (:func:`marginal_residuals`).
 
     Parameters
@@ -455,6 +458,10 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         Endpoint noise variance (px^2), fixed.
     neighbours : (N, k) int, optional
         Image neighbours for the spatial prior of :func:`.spatial.smooth_labels`.
+    rounds, iterations : int
+        Fit/assign rounds and LM iterations per body and round.
+    keep, first_iterations : int
+        LM runs (the best starts of the scan) and their iterations for a body's first fit.
 
     Returns
     -------
@@ -474,7 +481,7 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         cap = np.full(obs.n_tracks, np.inf)
         for _ in range(rounds):
             _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b], sigma2,
-                           lambda b: T[b])
+                           lambda b: T[b], keep, first_iterations)
             costs, logdet = marginal_costs(obs, W, T, sigma2)
             new, cap = _assign_marginal(costs, logdet, dof, sigma2, outlier_p, neighbours)
             if np.array_equal(new, lab):
