@@ -198,10 +198,10 @@ class LineFlows:
     E: np.ndarray            # (P, 3, 2) orthonormal pair orthogonal to m_bar
     M: np.ndarray            # (P, 2, 3)
     b: np.ndarray            # (P, 2)
-    Mw: np.ndarray           # (P, 2, 3) M whitened per track (see :func:`whiten_tracks`)
-    bw: np.ndarray           # (P, 2)    b whitened per track
-    # (N, 2 (K-1), 4): every track's whitened rows [Mw, -bw] by frame-pair slot, zero rows for
-    # missing pairs, so that a track's exact cost is |rows @ [c ; 1]|^2 in one product
+    pair_slot: np.ndarray    # (P,) int: frame pair index within the window (k of k -> k+1)
+    # (N, 2 (K-1), 4): every track's rows [M, -b] whitened per track (see :func:`whiten_tracks`)
+    # by frame-pair slot, zero rows for missing pairs, so that a track's exact cost is
+    # |rows @ [c ; 1]|^2 in one product
     track_rows: np.ndarray
     # derived per-track quantities computed once (the arrays above are never modified):
     # 'pairs' (N,) and the TrackStats of :func:`.models.track_stats` by weighting
@@ -228,7 +228,8 @@ class LineFlows:
     @property
     def whitened_rows(self) -> np.ndarray:
         """``(P, 2, 4)`` rows whose residuals are independent with unit variance (1 px)."""
-        return np.concatenate([self.Mw, -self.bw[..., None]], axis=-1)
+        n, d = self.track_rows.shape[:2]
+        return self.track_rows.reshape(n, d // 2, 2, 4)[self.pair_track, self.pair_slot]
 
 
 def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
@@ -252,19 +253,18 @@ def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
     M = -Et @ skew(mbar)
     b = np.einsum('pjk,pk->pj', Et, m1 - m0)
     cov0, cov1 = cov[ti, ki], cov[ti, ki + 1]
-    Mw, bw, rows = whiten_tracks(tracks.shape[0], tracks.shape[1] - 1, ti, ki, E, cov0, cov1,
-                                 M, b)
-    return LineFlows(tracks.shape[0], ti, m0, m1, cov0, cov1, E, M, b, Mw, bw, rows)
+    rows = whiten_tracks(tracks.shape[0], tracks.shape[1] - 1, ti, ki, E, cov0, cov1, M, b)
+    return LineFlows(tracks.shape[0], ti, m0, m1, cov0, cov1, E, M, b, ki, rows)
 
 
 def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E: np.ndarray,
                   cov0: np.ndarray, cov1: np.ndarray, M: np.ndarray, b: np.ndarray
-                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  ) -> np.ndarray:
     """Whiten every track's stacked residuals ``r = M c - b`` with their full covariance.
 
-    Returns ``Mw (P, 2, 3)`` and ``bw (P, 2)`` per frame pair, and the same as rows
-    ``[Mw, -bw]`` per track ``(N, 2 (K-1), 4)`` with zero rows where a pair is missing (its
-    slot is uncorrelated with the others, so its whitened rows stay zero).
+    Returns the whitened rows ``[M, -b]`` of every track ``(N, 2 (K-1), 4)`` by frame-pair
+    slot, zero where a pair is missing (its slot is uncorrelated with the others, so its
+    whitened rows stay zero).
 
     Consecutive frame pairs of a track share a frame, so their residuals are correlated
     (``Cov(r_t, r_t+1) = -E_t^T S_m(t+1) E_t+1``): the covariance of a track's ``2 (K-1)``
@@ -295,9 +295,8 @@ def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E
     stacked[ti, slot, :, 3] = b
     L = np.linalg.cholesky(full)
     rows = np.linalg.solve(L, stacked.reshape(n_tracks, d, 4))
-    white = rows.reshape(n_tracks, n_slots, 2, 4)[ti, slot]
     rows[..., 3] *= -1.0
-    return white[..., :3], white[..., 3], rows
+    return rows
 
 
 def first_midpoints(tracks: np.ndarray) -> np.ndarray:

@@ -123,17 +123,15 @@ def sum_by_track(values: np.ndarray, pair_track: np.ndarray, n_tracks: int) -> n
     return out
 
 
-def pair_costs(flows: LineFlows, c: np.ndarray, weighted: bool = True) -> np.ndarray:
-    """Cost ``(P, n)`` of every frame pair under every body (see the module docstring).
+def pair_costs(flows: LineFlows, c: np.ndarray) -> np.ndarray:
+    """Algebraic (unweighted) cost ``(P, n)`` of every frame pair under every body.
 
-    Weighted costs use the per-track whitened residuals, so they add up to the exact
-    Mahalanobis cost of each track.
+    The distance of the pair's rows to the hyperplane ``[c ; 1]`` (the module docstring); the
+    weighted costs are per track (:func:`track_costs`), since whitening couples a track's pairs.
     """
     c = np.atleast_2d(np.asarray(c, dtype=float))
-    M, b = (flows.Mw, flows.bw) if weighted else (flows.M, flows.b)
-    r = np.einsum('pjk,nk->pnj', M, c) - b[:, None, :]
-    cost = np.sum(r * r, axis=2)
-    return cost if weighted else cost / (1.0 + np.sum(c * c, axis=1))[None, :]
+    r = np.einsum('pjk,nk->pnj', flows.M, c) - flows.b[:, None, :]
+    return np.sum(r * r, axis=2) / (1.0 + np.sum(c * c, axis=1))[None, :]
 
 
 def track_costs(flows: LineFlows, c: np.ndarray, weighted: bool = True) -> np.ndarray:
@@ -148,7 +146,7 @@ def track_costs(flows: LineFlows, c: np.ndarray, weighted: bool = True) -> np.nd
         r = flows.track_rows @ u.T                                  # (N, 2 (K-1), n)
         out = np.einsum('ndh,ndh->nh', r, r)
     else:
-        out = sum_by_track(pair_costs(flows, c, weighted), flows.pair_track, flows.n_tracks)
+        out = sum_by_track(pair_costs(flows, c), flows.pair_track, flows.n_tracks)
     out[flows.pairs_per_track() == 0] = np.nan
     return out
 
