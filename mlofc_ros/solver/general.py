@@ -598,16 +598,12 @@ def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np
     if idx.size < 3:
         return np.full((3, 3), np.inf)
     x = np.r_[w, t]
+    _, n0 = _costs2(obs, idx, w, t, sigma2 if marginal else None)
     if marginal:
-        _, n0 = _costs2(obs, idx, w, t, sigma2)
-
         def vec(dx: np.ndarray) -> np.ndarray:
             return marginal_residuals(obs, idx, x[:3] + dx[:3], x[3:] + dx[3:], sigma2, n0,
                                       fixed=n0)[0].ravel()
     else:
-        res, n0 = line_residuals(obs, idx, w, t)
-        res, n0 = line_residuals(obs, idx, w, t, n0)
-
         def vec(dx: np.ndarray) -> np.ndarray:
             return np.sqrt(line_residuals(obs, idx, x[:3] + dx[:3], x[3:] + dx[3:], n0)[0])
     r0 = vec(np.zeros(6))
