@@ -170,9 +170,8 @@ def orthonormal_pair(m: np.ndarray) -> np.ndarray:
     (vertical image lines included).
     """
     m = m / _norm3(m)
-    axis = np.zeros_like(m)
     idx = np.argmin(np.abs(m), axis=-1)
-    np.put_along_axis(axis, idx[..., None], 1.0, axis=-1)
+    axis = (idx[..., None] == np.arange(3)).astype(float)     # one-hot: cheaper than a put
     e1 = _cross3(m, axis)
     e1 /= _norm3(e1)
     out = np.empty(m.shape + (2,))

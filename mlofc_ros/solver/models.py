@@ -21,7 +21,7 @@ Two residuals exist side by side:
   covariance propagated from 1 px endpoint noise (short lines weigh less). Divided by the true
   endpoint variance it is chi-square with ``2 * pairs`` degrees of freedom.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional, Tuple
 
 import numpy as np
@@ -45,6 +45,9 @@ class TrackStats:
     usable: np.ndarray  # (N,) bool: the track has at least one frame pair
     weighted: bool
     stacked: Optional[np.ndarray] = None   # (N, 12) [A, g], see fit_stats
+    # fit_stats results by labelling: K-subspaces, the final pass and the covariances refit
+    # the same labels in a row (the arrays are never modified, only copies handed out)
+    fits: dict = field(default_factory=dict, repr=False, compare=False)
 
 
 def track_stats(flows: LineFlows, weighted: bool = True) -> TrackStats:
@@ -92,6 +95,15 @@ def quad_costs(stats: TrackStats, c: np.ndarray) -> np.ndarray:
 
 def fit_stats(stats: TrackStats, labels: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
     """Least-squares ``c (n, 3)`` per body from its tracks' statistics; information (n, 3, 3)."""
+    labels = np.asarray(labels)
+    key = (n, labels.dtype.str, labels.tobytes())
+    hit = stats.fits.get(key)
+    if hit is None:
+        hit = stats.fits[key] = _fit_stats(stats, labels, n)
+    return hit[0].copy(), hit[1].copy()
+
+
+def _fit_stats(stats: TrackStats, labels: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
     use = (labels >= 0) & stats.usable
     # one weighted bincount over the 12 entries (A, g) of every track: it adds in track order
     # like np.add.at (the same sums), several times faster
