@@ -1,0 +1,60 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Warm-started robust solves (``init_labels``: the previous window's labels, as the pipeline)."""
+import numpy as np
+
+from mlofc_ros.bench.common import best_permutation, motion_errors
+from mlofc_ros.solver import segment_lines
+from mlofc_ros.synthetic import make_scene
+
+
+def _wrong(labels, truth, n):
+    return best_permutation(labels, truth, n)[1] / truth.size
+
+
+def _scene(seed):
+    return make_scene(3, 40, n_frames=6, noise_px=1.0, seed=seed)
+
+
+def test_warm_start_from_the_last_window_keeps_the_labels_and_skips_the_search():
+    for seed in range(3):
+        sc = _scene(seed)
+        cold = segment_lines(sc.tracks[:, :5], 3, intrinsics=sc.intrinsics, seed=0)
+        warm = segment_lines(sc.tracks[:, 1:], 3, intrinsics=sc.intrinsics, seed=0,
+                             init_labels=cold.labels)
+        again = segment_lines(sc.tracks[:, 1:], 3, intrinsics=sc.intrinsics, seed=0)
+        assert warm.info['candidate'] == 'previous'
+        assert _wrong(warm.labels, sc.labels, 3) <= _wrong(again.labels, sc.labels, 3) + 0.01
+        assert _wrong(warm.labels, sc.labels, 3) < 0.03
+        perm = best_permutation(warm.labels, sc.labels, 3)[0]
+        assert motion_errors(warm.angular_velocities, sc.angular_velocities, perm)[0] < 0.05
+
+
+def test_a_body_missing_from_the_previous_labels_is_searched_for():
+    # the previous window merged bodies 1 and 2: a warm start would keep a body with no tracks
+    sc = _scene(7)
+    merged = np.where(sc.labels == 2, 1, sc.labels)
+    res = segment_lines(sc.tracks[:, 1:], 3, intrinsics=sc.intrinsics, seed=0,
+                        init_labels=merged)
+    assert res.info['candidate'] != 'previous' or len(res.info['candidate_costs']) > 1
+    assert _wrong(res.labels, sc.labels, 3) < 0.03
+
+
+def test_stale_labels_that_no_longer_explain_the_window_fall_back_to_the_search():
+    sc = _scene(11)
+    rng = np.random.default_rng(0)
+    stale = rng.integers(0, 3, sc.labels.size)                       # every body held, but wrong
+    res = segment_lines(sc.tracks[:, 1:], 3, intrinsics=sc.intrinsics, seed=0,
+                        init_labels=stale)
+    assert _wrong(res.labels, sc.labels, 3) < 0.03
