@@ -643,6 +643,7 @@ class LineTracker:
 
     def _cost(self, trk: np.ndarray, det: np.ndarray, scale: np.ndarray) -> np.ndarray:
         """Association cost (T, D), inf outside the gates; ``scale`` (T,) widens the gates."""
+        t_n, d_n = trk.shape[0], det.shape[0]
         tx1, ty1, tx2, ty2 = trk.T
         dx1, dy1, dx2, dy2 = det.T
         tl = np.maximum(np.hypot(tx2 - tx1, ty2 - ty1), 1e-9)
@@ -650,32 +651,36 @@ class LineTracker:
         dl = np.maximum(np.hypot(dx2 - dx1, dy2 - dy1), 1e-9)
         dux, duy = (dx2 - dx1) / dl, (dy2 - dy1) / dl
         tcx, tcy = 0.5 * (tx1 + tx2), 0.5 * (ty1 + ty2)
-        scale = scale[:, None]
         dist_thr = self.distance_px * scale
-        cosang = np.abs(tux[:, None] * dux[None, :] + tuy[:, None] * duy[None, :])   # (T, D)
-        ang_thr = np.maximum(np.deg2rad(self.angle_deg) * scale,
-                             np.arctan2(dist_thr, np.minimum(tl[:, None], dl[None, :])))
+        # distances of the detection endpoints to the track line, on every pair: the cheap
+        # gate that leaves few pairs; the other gates and the cost (arctan2, cos, arccos)
+        # are evaluated on those pairs only
+        rx1 = dx1[None, :] - tcx[:, None]
+        ry1 = dy1[None, :] - tcy[:, None]
+        rx2 = dx2[None, :] - tcx[:, None]
+        ry2 = dy2[None, :] - tcy[:, None]
+        dist = np.maximum(np.abs(rx1 * tuy[:, None] - ry1 * tux[:, None]),
+                          np.abs(rx2 * tuy[:, None] - ry2 * tux[:, None]))
+        pair = np.flatnonzero(dist <= dist_thr[:, None])
+        i, j = pair // d_n, pair % d_n
+        thr, sc, ti = dist_thr[i], scale[i], tl[i]
+        cosang = np.abs(tux[i] * dux[j] + tuy[i] * duy[j])
+        ang_thr = np.maximum(np.deg2rad(self.angle_deg) * sc,
+                             np.arctan2(thr, np.minimum(ti, dl[j])))
         gate = cosang >= np.cos(ang_thr)
-        # distances of the detection endpoints to the track line
-        e1 = np.abs((dx1[None, :] - tcx[:, None]) * tuy[:, None]
-                    - (dy1[None, :] - tcy[:, None]) * tux[:, None])
-        e2 = np.abs((dx2[None, :] - tcx[:, None]) * tuy[:, None]
-                    - (dy2[None, :] - tcy[:, None]) * tux[:, None])
-        dist = np.maximum(e1, e2)
-        gate &= dist <= dist_thr
         # overlap along the track line, over the shorter length
-        a1 = (dx1[None, :] - tcx[:, None]) * tux[:, None] + (dy1[None, :] - tcy[:, None]) \
-            * tuy[:, None]
-        a2 = (dx2[None, :] - tcx[:, None]) * tux[:, None] + (dy2[None, :] - tcy[:, None]) \
-            * tuy[:, None]
-        half = 0.5 * tl[:, None]
+        a1 = rx1.ravel()[pair] * tux[i] + ry1.ravel()[pair] * tuy[i]
+        a2 = rx2.ravel()[pair] * tux[i] + ry2.ravel()[pair] * tuy[i]
+        half = 0.5 * ti
         lo = np.maximum(np.minimum(a1, a2), -half)
         hi = np.minimum(np.maximum(a1, a2), half)
-        overlap = (hi - lo) / np.minimum(tl[:, None], dl[None, :])
+        overlap = (hi - lo) / np.minimum(ti, dl[j])
         gate &= overlap >= self.min_overlap
         ang = np.arccos(np.minimum(cosang, 1.0))
-        cost = dist / dist_thr + ang / ang_thr - 0.5 * np.minimum(overlap, 1.0)
-        return np.where(gate, cost, np.inf)
+        cost = np.full((t_n, d_n), np.inf)
+        cost.ravel()[pair[gate]] = (dist.ravel()[pair] / thr + ang / ang_thr
+                                    - 0.5 * np.minimum(overlap, 1.0))[gate]
+        return cost
 
     @staticmethod
     def _fuse(det: np.ndarray, owner: np.ndarray, t_n: int, ref: np.ndarray) -> np.ndarray:
