@@ -118,14 +118,15 @@ def _half_medians(off: np.ndarray, valid: np.ndarray) -> Tuple[np.ndarray, np.nd
 _REMAP_COLS = 16384
 
 
-def _normal_search(image: np.ndarray, px: np.ndarray, py: np.ndarray, nx: np.ndarray,
-                   ny: np.ndarray, radius: int, min_gradient: float, min_relative: float,
+def _normal_search(image: np.ndarray, pts: np.ndarray, nrm: np.ndarray, radius: int,
+                   min_gradient: float, min_relative: float,
                    signed: Optional[np.ndarray] = None, prefer_polarity: float = 0.0
                    ) -> Tuple[np.ndarray, np.ndarray]:
     """Sub-pixel edge offset along the normal at points (T, S): (offset (T, S) px, found (T, S)).
 
-    ``image`` (H, W) float32; ``S`` points ``(px, py)`` px on each of ``T`` lines, the unit
-    normal ``(nx, ny)`` (T,) of each line.
+    ``image`` (H, W) float32; ``pts`` (2, T, S) px: x and y of ``S`` points on each of ``T``
+    lines; ``nrm`` (2, T) the unit normal of each line (coordinate-major arrays: one numpy
+    call handles x and y).
     The intensity is sampled at integer offsets ``-radius - 1 .. radius + 1`` along the
     normal; the nearest local maximum of the central-difference gradient magnitude (at least
     ``min_gradient`` grey levels per 2 px and ``min_relative`` of the strongest in the window;
@@ -133,15 +134,16 @@ def _normal_search(image: np.ndarray, px: np.ndarray, py: np.ndarray, nx: np.nda
     gradient getting darker along +normal counts on those lines; ``prefer_polarity`` px: a
     peak of the other polarity counts as that much further away (see :func:`refine_lines`).
     """
-    t_n, s_n = px.shape
+    t_n, s_n = pts.shape[1:]
     n = t_n * s_n
     offs = np.arange(-radius - 1, radius + 2, dtype=np.float64)                 # (O,)
     o_n = offs.size
     # offset-major layout (O, N): the per-sample reductions below then run across rows
     # (long inner loops instead of one short row per sample), and remap gets O long rows
     # (about half the time of N rows of O pixels); the products offset x normal are per line
-    mx = (px.reshape(1, n) + np.repeat(offs[:, None] * nx, s_n, axis=1)).astype(np.float32)
-    my = (py.reshape(1, n) + np.repeat(offs[:, None] * ny, s_n, axis=1)).astype(np.float32)
+    m = (pts.reshape(2, 1, n)
+         + np.repeat(offs[:, None] * nrm[:, None, :], s_n, axis=2)).astype(np.float32)
+    mx, my = m                                                                  # (O, N)
     val = np.empty((o_n, n), np.float32)
     for c in range(0, n, _REMAP_COLS):       # remap takes < SHRT_MAX columns
         val[:, c:c + _REMAP_COLS] = cv2.remap(image, mx[:, c:c + _REMAP_COLS],
@@ -161,25 +163,30 @@ def _normal_search(image: np.ndarray, px: np.ndarray, py: np.ndarray, nx: np.nda
     peak[1:] &= g[1:] >= g[:-1]
     peak[:-1] &= g[:-1] >= g[1:]
     # score: distance from the prediction, ties to the stronger, inf off the peaks
-    score = np.abs(np.arange(-radius, radius + 1, dtype=np.float64))[:, None] - 1e-4 * g
+    # (dtype=: the mixed float64 - float32 loop is slower than an explicit float64 one;
+    # where= arguments and np.copyto are slower than an added array and np.putmask)
+    score = np.subtract(np.abs(np.arange(-radius, radius + 1.0))[:, None], 1e-4 * g,
+                        dtype=np.float64)
     if other is not None:
-        np.add(score, prefer_polarity, out=score, where=other)
-    np.copyto(score, np.inf, where=~peak)
-    best = score.min(axis=0)
-    # first row reaching the minimum, as argmin would pick (argmax of bools along the
-    # short axis 0 is cheaper than argmin of floats)
-    j = np.argmax(score == best, axis=0)
-    cols = np.arange(n)
-    valid = np.isfinite(best)
-    g0 = g[j, cols]
-    gm = g[np.maximum(j - 1, 0), cols]
-    gq = g[np.minimum(j + 1, kk - 1), cols]
+        score += prefer_polarity * other
+    np.putmask(score, ~peak, np.inf)
+    j = np.argmin(score, axis=0)
+    valid = np.isfinite(score.min(axis=0))
+    # flat indices into g; the neighbours at j = 0 / kk - 1 are clipped (not used there)
+    gf = g.ravel()
+    at = j * n + np.arange(n)
+    g0 = gf.take(at)
+    gm = gf.take(at - n, mode='clip')
+    gq = gf.take(at + n, mode='clip')
     den = gm - 2.0 * g0 + gq
     inner = (j > 0) & (j < kk - 1) & (den < 0)
     delta = np.where(inner, 0.5 * (gm - gq) / np.where(inner, den, -1.0), 0.0)
     # np.minimum / np.maximum: np.clip's Python wrapper costs more than the work here
     off = (j - radius) + np.minimum(np.maximum(delta, -0.5), 0.5)
     return off.reshape(t_n, s_n), valid.reshape(t_n, s_n)
+
+
+_ROT90 = np.array([[-1.0], [1.0]])       # (x, y) -> (-y, x) as ``v[::-1] * _ROT90``
 
 
 @lru_cache(maxsize=8)
@@ -219,19 +226,19 @@ def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 12, radius
     if t_n == 0:
         return seg.copy(), np.zeros(0), np.zeros(0)
     x1, y1, x2, y2 = seg.T
-    length = np.maximum(np.hypot(x2 - x1, y2 - y1), 1e-9)
-    ux, uy = (x2 - x1) / length, (y2 - y1) / length
-    nx, ny = -uy, ux
+    # coordinate-major (2, T, ...) arrays: one numpy call for x and y
+    d = seg.T[2:] - seg.T[:2]                                                   # (2, T)
+    length = np.maximum(np.hypot(d[0], d[1]), 1e-9)
+    u = d / length
+    nrm = u[::-1] * _ROT90                                                      # (-uy, ux)
     t, t1, t2 = _sample_grid(n_samples)                                         # (S,)
-    px = x1[:, None] + t[None, :] * (x2 - x1)[:, None]                          # (T, S)
-    py = y1[:, None] + t[None, :] * (y2 - y1)[:, None]
+    pts = seg.T[:2, :, None] + t * d[:, :, None]                                # (2, T, S)
     sg = None
     if signed is not None:
         sg = np.broadcast_to(np.asarray(signed, bool), (t_n,))
-    off, valid = _normal_search(image, px, py, nx, ny, radius, min_gradient, min_relative,
-                                sg, prefer_polarity)
-    ex = px + off * nx[:, None]
-    ey = py + off * ny[:, None]
+    off, valid = _normal_search(image, pts, nrm, radius, min_gradient, min_relative, sg,
+                                prefer_polarity)
+    ex, ey = pts + off * nrm[:, :, None]
     # robust start: the line through the median offsets of the two halves (resists a
     # neighbouring edge caught by up to half of the samples of each half)
     m1, m2 = _half_medians(off, valid)
@@ -245,7 +252,7 @@ def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 12, radius
     w_sum = w.sum(1)
     support = w_sum / n_samples                       # = w.mean(1), without its overhead
     rms = np.sqrt((w * r * r).sum(1) / np.maximum(w_sum, 1.0))
-    flip = fx * ux + fy * uy < 0
+    flip = fx * u[0] + fy * u[1] < 0
     fx, fy = np.where(flip, -fx, fx), np.where(flip, -fy, fy)
     ta = (x1 - cx) * fx + (y1 - cy) * fy
     tb = (x2 - cx) * fx + (y2 - cy) * fy
@@ -275,19 +282,16 @@ def grow_lines(image: np.ndarray, seg: np.ndarray, step: float = 2.0, n_steps: i
     d = s[:, 2:] - s[:, :2]
     length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
     u = d / length[:, None]                                                    # (T, 2)
-    nrm = np.stack([-u[:, 1], u[:, 0]], 1)
     dist = step * (np.arange(n_steps) + 1.0)                                   # (K,)
-    # (T, 2 ends, K, 2): samples beyond the first end (backwards) and the second (forwards)
-    base = np.stack([s[:, :2], s[:, 2:]], 1)
+    # (2 coords, T, 2 ends, K): samples beyond the first end (backwards) and the second
+    # (forwards)
+    base = s.T.reshape(2, 2, t_n).transpose(1, 2, 0)                           # (2, T, 2)
     sgn = np.array([-1.0, 1.0])
-    pts = base[:, :, None, :] + (sgn[None, :, None, None] * dist[None, None, :, None]
-                                 * u[:, None, None, :])
-    off, found = _normal_search(image, pts[..., 0].reshape(t_n, -1),
-                                pts[..., 1].reshape(t_n, -1), nrm[:, 0], nrm[:, 1], radius,
+    pts = base[..., None] + (sgn[:, None] * dist)[None, None] * u.T[:, :, None, None]
+    off, found = _normal_search(image, pts.reshape(2, t_n, -1), u.T[::-1] * _ROT90, radius,
                                 min_gradient, min_relative)
     ok = (found & (np.abs(off) <= tol_px)).reshape(t_n, 2, n_steps)
-    ok &= (pts[..., 0] >= 0) & (pts[..., 0] <= w - 1) & (pts[..., 1] >= 0) \
-        & (pts[..., 1] <= h - 1)
+    ok &= (pts[0] >= 0) & (pts[0] <= w - 1) & (pts[1] >= 0) & (pts[1] <= h - 1)
     # consecutive supported samples from the end outwards
     run = np.where(ok.all(axis=2), n_steps, np.argmin(ok, axis=2))           # (T, 2)
     grown = step * run
@@ -629,7 +633,9 @@ class LineTracker:
         if self.rescue_gate > 1.0:
             # second chance, mutual best only: a track that drifted a little off its edge
             # takes the detection back instead of a new id being born on the edge
-            ft = np.setdiff1d(np.arange(t_n), owner[owner >= 0])
+            taken = np.zeros(t_n, bool)
+            taken[owner[owner >= 0]] = True
+            ft = np.flatnonzero(~taken)          # = setdiff1d, without its sorting
             fd = np.nonzero(owner < 0)[0]
             if ft.size and fd.size:
                 # rescue_gate replaces (does not multiply) the x2 of uncarried tracks: wider
