@@ -42,6 +42,7 @@ Per frame, vectorised over tracks and detections (no Python loop per line):
 Segments are ``(u1, v1, u2, v2)`` px in the input image. A track keeps the orientation it was
 born with (the detector's: brighter side on the left).
 """
+from functools import lru_cache
 from typing import Dict, Optional, Tuple, Union
 
 import cv2
@@ -88,59 +89,113 @@ def _tls_rows(x: np.ndarray, y: np.ndarray, w: np.ndarray
     return cx, cy, np.cos(theta), np.sin(theta)
 
 
-def _row_median(vals: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Median of each row of (n, k) ``vals`` over its ``valid`` entries (NaN when none)."""
-    v = np.sort(np.where(valid, vals, np.inf), axis=1)
-    cnt = valid.sum(axis=1)
-    rows = np.arange(v.shape[0])
+def _half_medians(off: np.ndarray, valid: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Median of the ``valid`` entries of the first and the second half of each row of (n, S).
+
+    Returns ``(m1 (n,), m2 (n,))``, NaN where a half has no valid entry. For an odd ``S`` the
+    first half (``S // 2`` entries) is padded with an invalid one; both halves are sorted in
+    one call (each ``np.sort`` costs mostly fixed overhead at these sizes).
+    """
+    n, s_n = off.shape
+    half = s_n // 2
+    vals = np.where(valid, off, np.inf)
+    if s_n % 2 == 0:
+        v = vals.reshape(n, 2, half)
+    else:
+        v = np.full((n, 2, half + 1), np.inf)
+        v[:, 0, :half] = vals[:, :half]
+        v[:, 1] = vals[:, half:]
+    v = np.sort(v, axis=2).reshape(2 * n, -1)                                  # (2n, S/2)
+    # the offsets of found edges are finite, the others inf
+    cnt = np.isfinite(v).sum(axis=1)
+    rows = np.arange(2 * n)
     lo = v[rows, np.maximum((cnt - 1) // 2, 0)]
     hi = v[rows, np.maximum(cnt // 2, 0)]
-    return np.where(cnt > 0, 0.5 * (lo + hi), np.nan)
+    med = np.where(cnt > 0, 0.5 * (lo + hi), np.nan).reshape(n, 2)
+    return med[:, 0], med[:, 1]
 
 
-def _normal_search(image: np.ndarray, px: np.ndarray, py: np.ndarray, nx: np.ndarray,
-                   ny: np.ndarray, radius: int, min_gradient: float, min_relative: float,
+_REMAP_COLS = 16384
+
+
+def _normal_search(image: np.ndarray, pts: np.ndarray, nrm: np.ndarray, radius: int,
+                   min_gradient: float, min_relative: float,
                    signed: Optional[np.ndarray] = None, prefer_polarity: float = 0.0
                    ) -> Tuple[np.ndarray, np.ndarray]:
-    """Sub-pixel edge offset along the normal at points (N,): (offset (N,) px, found (N,)).
+    """Sub-pixel edge offset along the normal at points (T, S): (offset (T, S) px, found (T, S)).
 
-    ``image`` (H, W) float32; points ``(px, py)`` px with unit normals ``(nx, ny)``, all (N,).
+    ``image`` (H, W) float32; ``pts`` (2, T, S) px: x and y of ``S`` points on each of ``T``
+    lines; ``nrm`` (2, T) the unit normal of each line (coordinate-major arrays: one numpy
+    call handles x and y).
     The intensity is sampled at integer offsets ``-radius - 1 .. radius + 1`` along the
     normal; the nearest local maximum of the central-difference gradient magnitude (at least
     ``min_gradient`` grey levels per 2 px and ``min_relative`` of the strongest in the window;
-    ties: the stronger), refined by a parabola, is the edge. ``signed`` (N,) bool: only the
-    gradient getting darker along +normal counts there; ``prefer_polarity`` px: a peak of the
-    other polarity counts as that much further away (see :func:`refine_lines`).
+    ties: the stronger), refined by a parabola, is the edge. ``signed`` (T,) bool: only the
+    gradient getting darker along +normal counts on those lines; ``prefer_polarity`` px: a
+    peak of the other polarity counts as that much further away (see :func:`refine_lines`).
     """
-    n = px.size
+    t_n, s_n = pts.shape[1:]
+    n = t_n * s_n
     offs = np.arange(-radius - 1, radius + 2, dtype=np.float64)                 # (O,)
-    mx = (px[:, None] + offs * nx[:, None]).astype(np.float32)                  # (N, O)
-    my = (py[:, None] + offs * ny[:, None]).astype(np.float32)
-    val = cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    g = val[:, 2:] - val[:, :-2]                                                # (N, K)
+    o_n = offs.size
+    # offset-major layout (O, N): the per-sample reductions below then run across rows
+    # (long inner loops instead of one short row per sample), and remap gets O long rows
+    # (about half the time of N rows of O pixels); the products offset x normal are per line
+    m = (pts.reshape(2, 1, n)
+         + np.repeat(offs[:, None] * nrm[:, None, :], s_n, axis=2)).astype(np.float32)
+    mx, my = m                                                                  # (O, N)
+    val = np.empty((o_n, n), np.float32)
+    for c in range(0, n, _REMAP_COLS):       # remap takes < SHRT_MAX columns
+        val[:, c:c + _REMAP_COLS] = cv2.remap(image, mx[:, c:c + _REMAP_COLS],
+                                              my[:, c:c + _REMAP_COLS], cv2.INTER_LINEAR,
+                                              borderMode=cv2.BORDER_REPLICATE)
+    g = val[2:] - val[:-2]                                                      # (K, N)
     # +normal is the right-hand side: the segment's own polarity (brighter on the left)
     # gets darker along it, g < 0
-    pen = prefer_polarity * (g > 0) if prefer_polarity > 0 else 0.0
+    other = g > 0 if prefer_polarity > 0 else None
     if signed is None:
         g = np.abs(g)
     else:
-        g = np.where(signed[:, None], np.maximum(-g, 0.0), np.abs(g))
+        g = np.where(np.repeat(signed, s_n), np.maximum(-g, 0.0), np.abs(g))
     kk = 2 * radius + 1
-    thr = np.maximum(min_gradient, min_relative * g.max(axis=1))
-    peak = g >= thr[:, None]
-    peak[:, 1:] &= g[:, 1:] >= g[:, :-1]
-    peak[:, :-1] &= g[:, :-1] >= g[:, 1:]
-    score = np.where(peak, np.abs(np.arange(-radius, radius + 1)) - 1e-4 * g + pen, np.inf)
-    j = np.argmin(score, axis=1)
-    rows = np.arange(n)
-    valid = np.isfinite(score[rows, j])
-    g0 = g[rows, j]
-    gm = g[rows, np.maximum(j - 1, 0)]
-    gq = g[rows, np.minimum(j + 1, kk - 1)]
+    thr = np.maximum(min_gradient, min_relative * g.max(axis=0))
+    peak = g >= thr
+    peak[1:] &= g[1:] >= g[:-1]
+    peak[:-1] &= g[:-1] >= g[1:]
+    # score: distance from the prediction, ties to the stronger, inf off the peaks
+    # (dtype=: the mixed float64 - float32 loop is slower than an explicit float64 one;
+    # where= arguments and np.copyto are slower than an added array and np.putmask)
+    score = np.subtract(np.abs(np.arange(-radius, radius + 1.0))[:, None], 1e-4 * g,
+                        dtype=np.float64)
+    if other is not None:
+        score += prefer_polarity * other
+    np.putmask(score, ~peak, np.inf)
+    j = np.argmin(score, axis=0)
+    valid = np.isfinite(score.min(axis=0))
+    # flat indices into g; the neighbours at j = 0 / kk - 1 are clipped (not used there)
+    gf = g.ravel()
+    at = j * n + np.arange(n)
+    g0 = gf.take(at)
+    gm = gf.take(at - n, mode='clip')
+    gq = gf.take(at + n, mode='clip')
     den = gm - 2.0 * g0 + gq
     inner = (j > 0) & (j < kk - 1) & (den < 0)
     delta = np.where(inner, 0.5 * (gm - gq) / np.where(inner, den, -1.0), 0.0)
-    return (j - radius) + np.clip(delta, -0.5, 0.5), valid
+    # np.minimum / np.maximum: np.clip's Python wrapper costs more than the work here
+    off = (j - radius) + np.minimum(np.maximum(delta, -0.5), 0.5)
+    return off.reshape(t_n, s_n), valid.reshape(t_n, s_n)
+
+
+_ROT90 = np.array([[-1.0], [1.0]])       # (x, y) -> (-y, x) as ``v[::-1] * _ROT90``
+
+
+@lru_cache(maxsize=8)
+def _sample_grid(n_samples: int) -> Tuple[np.ndarray, float, float]:
+    """Sample positions ``t`` (S,) along a segment and the mean ``t`` of each half."""
+    t = (np.arange(n_samples) + 0.5) / n_samples
+    t.flags.writeable = False
+    half = n_samples // 2
+    return t, float(t[:half].mean()), float(t[half:].mean())
 
 
 def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 12, radius: int = 3,
@@ -171,28 +226,22 @@ def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 12, radius
     if t_n == 0:
         return seg.copy(), np.zeros(0), np.zeros(0)
     x1, y1, x2, y2 = seg.T
-    length = np.maximum(np.hypot(x2 - x1, y2 - y1), 1e-9)
-    ux, uy = (x2 - x1) / length, (y2 - y1) / length
-    nx, ny = -uy, ux
-    t = (np.arange(n_samples) + 0.5) / n_samples                                # (S,)
-    px = x1[:, None] + t[None, :] * (x2 - x1)[:, None]                          # (T, S)
-    py = y1[:, None] + t[None, :] * (y2 - y1)[:, None]
+    # coordinate-major (2, T, ...) arrays: one numpy call for x and y
+    d = seg.T[2:] - seg.T[:2]                                                   # (2, T)
+    length = np.maximum(np.hypot(d[0], d[1]), 1e-9)
+    u = d / length
+    nrm = u[::-1] * _ROT90                                                      # (-uy, ux)
+    t, t1, t2 = _sample_grid(n_samples)                                         # (S,)
+    pts = seg.T[:2, :, None] + t * d[:, :, None]                                # (2, T, S)
     sg = None
     if signed is not None:
-        sg = np.repeat(np.broadcast_to(np.asarray(signed, bool), (t_n,)), n_samples)
-    off, valid = _normal_search(image, px.ravel(), py.ravel(), np.repeat(nx, n_samples),
-                                np.repeat(ny, n_samples), radius, min_gradient, min_relative,
-                                sg, prefer_polarity)
-    off = off.reshape(t_n, n_samples)
-    valid = valid.reshape(t_n, n_samples)
-    ex = px + off * nx[:, None]
-    ey = py + off * ny[:, None]
+        sg = np.broadcast_to(np.asarray(signed, bool), (t_n,))
+    off, valid = _normal_search(image, pts, nrm, radius, min_gradient, min_relative, sg,
+                                prefer_polarity)
+    ex, ey = pts + off * nrm[:, :, None]
     # robust start: the line through the median offsets of the two halves (resists a
     # neighbouring edge caught by up to half of the samples of each half)
-    half = n_samples // 2
-    m1 = _row_median(off[:, :half], valid[:, :half])
-    m2 = _row_median(off[:, half:], valid[:, half:])
-    t1, t2 = t[:half].mean(), t[half:].mean()
+    m1, m2 = _half_medians(off, valid)
     m1 = np.where(np.isfinite(m1), m1, m2)
     m2 = np.where(np.isfinite(m2), m2, m1)
     guess = m1[:, None] + (m2 - m1)[:, None] * (t[None, :] - t1) / (t2 - t1)
@@ -200,13 +249,16 @@ def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 12, radius
     cx, cy, fx, fy = _tls_rows(ex, ey, w)
     r = np.abs((ex - cx[:, None]) * fy[:, None] - (ey - cy[:, None]) * fx[:, None])
     w = w * (r <= inlier_px)
-    support = w.mean(axis=1)
-    rms = np.sqrt((w * r * r).sum(1) / np.maximum(w.sum(1), 1.0))
-    flip = fx * ux + fy * uy < 0
+    w_sum = w.sum(1)
+    support = w_sum / n_samples                       # = w.mean(1), without its overhead
+    rms = np.sqrt((w * r * r).sum(1) / np.maximum(w_sum, 1.0))
+    flip = fx * u[0] + fy * u[1] < 0
     fx, fy = np.where(flip, -fx, fx), np.where(flip, -fy, fy)
     ta = (x1 - cx) * fx + (y1 - cy) * fy
     tb = (x2 - cx) * fx + (y2 - cy) * fy
-    out = np.stack([cx + ta * fx, cy + ta * fy, cx + tb * fx, cy + tb * fy], axis=1)
+    out = np.empty((t_n, 4))
+    out[:, 0], out[:, 1] = cx + ta * fx, cy + ta * fy
+    out[:, 2], out[:, 3] = cx + tb * fx, cy + tb * fy
     return out, support, rms
 
 
@@ -230,20 +282,16 @@ def grow_lines(image: np.ndarray, seg: np.ndarray, step: float = 2.0, n_steps: i
     d = s[:, 2:] - s[:, :2]
     length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
     u = d / length[:, None]                                                    # (T, 2)
-    nrm = np.stack([-u[:, 1], u[:, 0]], 1)
     dist = step * (np.arange(n_steps) + 1.0)                                   # (K,)
-    # (T, 2 ends, K, 2): samples beyond the first end (backwards) and the second (forwards)
-    base = np.stack([s[:, :2], s[:, 2:]], 1)
+    # (2 coords, T, 2 ends, K): samples beyond the first end (backwards) and the second
+    # (forwards)
+    base = s.T.reshape(2, 2, t_n).transpose(1, 2, 0)                           # (2, T, 2)
     sgn = np.array([-1.0, 1.0])
-    pts = base[:, :, None, :] + (sgn[None, :, None, None] * dist[None, None, :, None]
-                                 * u[:, None, None, :])
-    off, found = _normal_search(image, pts[..., 0].ravel(), pts[..., 1].ravel(),
-                                np.repeat(nrm[:, 0], 2 * n_steps),
-                                np.repeat(nrm[:, 1], 2 * n_steps), radius, min_gradient,
-                                min_relative)
+    pts = base[..., None] + (sgn[:, None] * dist)[None, None] * u.T[:, :, None, None]
+    off, found = _normal_search(image, pts.reshape(2, t_n, -1), u.T[::-1] * _ROT90, radius,
+                                min_gradient, min_relative)
     ok = (found & (np.abs(off) <= tol_px)).reshape(t_n, 2, n_steps)
-    ok &= (pts[..., 0] >= 0) & (pts[..., 0] <= w - 1) & (pts[..., 1] >= 0) \
-        & (pts[..., 1] <= h - 1)
+    ok &= (pts[0] >= 0) & (pts[0] <= w - 1) & (pts[1] >= 0) & (pts[1] <= h - 1)
     # consecutive supported samples from the end outwards
     run = np.where(ok.all(axis=2), n_steps, np.argmin(ok, axis=2))           # (T, 2)
     grown = step * run
@@ -585,7 +633,9 @@ class LineTracker:
         if self.rescue_gate > 1.0:
             # second chance, mutual best only: a track that drifted a little off its edge
             # takes the detection back instead of a new id being born on the edge
-            ft = np.setdiff1d(np.arange(t_n), owner[owner >= 0])
+            taken = np.zeros(t_n, bool)
+            taken[owner[owner >= 0]] = True
+            ft = np.flatnonzero(~taken)          # = setdiff1d, without its sorting
             fd = np.nonzero(owner < 0)[0]
             if ft.size and fd.size:
                 # rescue_gate replaces (does not multiply) the x2 of uncarried tracks: wider
@@ -599,6 +649,7 @@ class LineTracker:
 
     def _cost(self, trk: np.ndarray, det: np.ndarray, scale: np.ndarray) -> np.ndarray:
         """Association cost (T, D), inf outside the gates; ``scale`` (T,) widens the gates."""
+        t_n, d_n = trk.shape[0], det.shape[0]
         tx1, ty1, tx2, ty2 = trk.T
         dx1, dy1, dx2, dy2 = det.T
         tl = np.maximum(np.hypot(tx2 - tx1, ty2 - ty1), 1e-9)
@@ -606,32 +657,36 @@ class LineTracker:
         dl = np.maximum(np.hypot(dx2 - dx1, dy2 - dy1), 1e-9)
         dux, duy = (dx2 - dx1) / dl, (dy2 - dy1) / dl
         tcx, tcy = 0.5 * (tx1 + tx2), 0.5 * (ty1 + ty2)
-        scale = scale[:, None]
         dist_thr = self.distance_px * scale
-        cosang = np.abs(tux[:, None] * dux[None, :] + tuy[:, None] * duy[None, :])   # (T, D)
-        ang_thr = np.maximum(np.deg2rad(self.angle_deg) * scale,
-                             np.arctan2(dist_thr, np.minimum(tl[:, None], dl[None, :])))
+        # distances of the detection endpoints to the track line, on every pair: the cheap
+        # gate that leaves few pairs; the other gates and the cost (arctan2, cos, arccos)
+        # are evaluated on those pairs only
+        rx1 = dx1[None, :] - tcx[:, None]
+        ry1 = dy1[None, :] - tcy[:, None]
+        rx2 = dx2[None, :] - tcx[:, None]
+        ry2 = dy2[None, :] - tcy[:, None]
+        dist = np.maximum(np.abs(rx1 * tuy[:, None] - ry1 * tux[:, None]),
+                          np.abs(rx2 * tuy[:, None] - ry2 * tux[:, None]))
+        pair = np.flatnonzero(dist <= dist_thr[:, None])
+        i, j = pair // d_n, pair % d_n
+        thr, sc, ti = dist_thr[i], scale[i], tl[i]
+        cosang = np.abs(tux[i] * dux[j] + tuy[i] * duy[j])
+        ang_thr = np.maximum(np.deg2rad(self.angle_deg) * sc,
+                             np.arctan2(thr, np.minimum(ti, dl[j])))
         gate = cosang >= np.cos(ang_thr)
-        # distances of the detection endpoints to the track line
-        e1 = np.abs((dx1[None, :] - tcx[:, None]) * tuy[:, None]
-                    - (dy1[None, :] - tcy[:, None]) * tux[:, None])
-        e2 = np.abs((dx2[None, :] - tcx[:, None]) * tuy[:, None]
-                    - (dy2[None, :] - tcy[:, None]) * tux[:, None])
-        dist = np.maximum(e1, e2)
-        gate &= dist <= dist_thr
         # overlap along the track line, over the shorter length
-        a1 = (dx1[None, :] - tcx[:, None]) * tux[:, None] + (dy1[None, :] - tcy[:, None]) \
-            * tuy[:, None]
-        a2 = (dx2[None, :] - tcx[:, None]) * tux[:, None] + (dy2[None, :] - tcy[:, None]) \
-            * tuy[:, None]
-        half = 0.5 * tl[:, None]
+        a1 = rx1.ravel()[pair] * tux[i] + ry1.ravel()[pair] * tuy[i]
+        a2 = rx2.ravel()[pair] * tux[i] + ry2.ravel()[pair] * tuy[i]
+        half = 0.5 * ti
         lo = np.maximum(np.minimum(a1, a2), -half)
         hi = np.minimum(np.maximum(a1, a2), half)
-        overlap = (hi - lo) / np.minimum(tl[:, None], dl[None, :])
+        overlap = (hi - lo) / np.minimum(ti, dl[j])
         gate &= overlap >= self.min_overlap
         ang = np.arccos(np.minimum(cosang, 1.0))
-        cost = dist / dist_thr + ang / ang_thr - 0.5 * np.minimum(overlap, 1.0)
-        return np.where(gate, cost, np.inf)
+        cost = np.full((t_n, d_n), np.inf)
+        cost.ravel()[pair[gate]] = (dist.ravel()[pair] / thr + ang / ang_thr
+                                    - 0.5 * np.minimum(overlap, 1.0))[gate]
+        return cost
 
     @staticmethod
     def _fuse(det: np.ndarray, owner: np.ndarray, t_n: int, ref: np.ndarray) -> np.ndarray:
