@@ -123,6 +123,15 @@ def test_window_starts_and_codes() -> None:
     assert bench.checkerboard_motion('three-cars') is None
 
 
+def test_ks_option() -> None:
+    assert bench.parse_args([]).ks == [2, 5]
+    assert bench.parse_args(['--ks', '10,5,2,5']).ks == [2, 5, 10]
+    for bad in ('1', 'x', ''):
+        with pytest.raises(SystemExit):
+            bench.parse_args(['--ks', bad])
+    assert bench.frames_of([{'k': 10}, {'k': 5}, {'k': 10}]) == [5, 10]
+
+
 def test_quick_benchmark(tmp_path: pathlib.Path) -> None:
     saved = tmp_path / 'records.json'
     assert bench.main(['--quick', '--out', str(tmp_path), '--save-records', str(saved)]) == 0

@@ -18,9 +18,10 @@ writes ``hopkins.md`` and ``hopkins.png`` to ``docs/results/`` (or ``--out``) an
 report.
 
 For every benchmark sequence (155; ``dancing`` excluded), ``--windows`` windows spread evenly over
-the sequence, and K = 2 (two consecutive frames, as the paper) and K = 5 frames, the line tracks
-come from :func:`mlofc_ros.datasets.hopkins.line_tracks` (pairs of same-motion points, see
-there) and every method of :data:`mlofc_ros.solver.METHODS` segments them with the true number
+the sequence, and K = 2 (two consecutive frames, as the paper) and K = 5 frames (``--ks`` adds
+others, e.g. ``--ks 2,5,10``), the line tracks come from
+:func:`mlofc_ros.datasets.hopkins.line_tracks` (pairs of same-motion points, see there) and
+every method of :data:`mlofc_ros.solver.METHODS` segments them with the true number
 of motions and UNKNOWN intrinsics (principal point at the image centre, focal length estimated;
 the files' K is only a normalisation). Misclassification: best relabelling, ``-1`` wrong.
 
@@ -66,6 +67,7 @@ WITH_OUTLIERS = ('robust', 'general')
 #: Diagnostic row: robust with a looser outlier bound (LOOSE_BOUND x the chi-square bound).
 LOOSE_BOUND = 3.0
 LOOSE = f', -1 bound x{LOOSE_BOUND:g}'
+#: Frames per window (K) of the default run; ``--ks`` adds others (e.g. 10).
 FRAMES = (2, 5)
 BENCH_GROUPS = ('checkerboard', 'traffic', 'articulated')
 QUICK_SEQUENCES = ('cars1', 'two_cranes')
@@ -294,13 +296,13 @@ def run_unit(unit: Unit) -> List[Dict[str, object]]:
 
 
 def make_units(paths: Sequence[pathlib.Path], windows: int, methods: Sequence[str],
-               seed: int) -> List[Unit]:
+               seed: int, ks: Sequence[int] = FRAMES) -> List[Unit]:
     """All (sequence, K, window) units; pairing seeds depend on (seed, name, K, window)."""
     units = []
     for path in paths:
         with np.load(path) as z:
             n_frames, n_motions = int(z['points'].shape[0]), int(z['n_motions'])
-        for k in FRAMES:
+        for k in ks:
             for w, start in enumerate(window_starts(n_frames, k, windows)):
                 ss = np.random.SeedSequence([seed, zlib.crc32(path.stem.encode()), k, w])
                 units.append(Unit(str(path), path.stem, n_motions, k, w, start,
@@ -334,6 +336,13 @@ def per_sequence(records: Sequence[Dict[str, object]]
     return out
 
 
+def frames_of(seqs) -> List[int]:
+    """Return the window lengths K of ``per_sequence`` results (or raw records), sorted."""
+    if isinstance(seqs, dict):
+        return sorted({int(k) for (_, k, _) in seqs})
+    return sorted({int(r['k']) for r in seqs})
+
+
 def _nanmedian(values: Sequence[float]) -> float:
     return common.summarize(values)['median']
 
@@ -357,11 +366,11 @@ def _names(methods: Sequence[str]) -> List[str]:
 
 def headline_table(seqs, methods: Sequence[str]) -> str:
     """Mean (median) misclassification % over all 2- and 3-motion sequences, K = 2 and 5."""
-    headers = ['method'] + [f'{n} motions, K={k}' for k in FRAMES for n in (2, 3)]
+    headers = ['method'] + [f'{n} motions, K={k}' for k in frames_of(seqs) for n in (2, 3)]
     rows = []
     for m in _names(methods):
         rows.append([m] + [_cell(_stat(seqs, k, m, lambda _, s, n=n: s['n'] == n))
-                           for k in FRAMES for n in (2, 3)])
+                           for k in frames_of(seqs) for n in (2, 3)])
     for name, two, three in REFERENCES:
         cells = [f'{two:.1f}', '—' if three is None else f'{three:.1f}']
         rows.append([f'*reference: {name}*'] + cells + cells)
@@ -382,7 +391,7 @@ def diagnostic_table(seqs, methods: Sequence[str]) -> str:
     rows = []
     for m in runners:
         row: List[object] = [m]
-        for k in FRAMES:
+        for k in frames_of(seqs):
             for n in (2, 3):
                 def keep(_, s, n=n) -> bool:
                     return s['n'] == n
@@ -390,13 +399,13 @@ def diagnostic_table(seqs, methods: Sequence[str]) -> str:
                 row.append('—' if not miscl['n'] else f"{miscl['mean']:.1f} "
                            f"({_stat(seqs, k, m, keep, 'unassigned')['mean']:.1f})")
         rows.append(row)
-    return common.markdown_table(['runner'] + [f'{n} motions, K={k}' for k in FRAMES
+    return common.markdown_table(['runner'] + [f'{n} motions, K={k}' for k in frames_of(seqs)
                                                for n in (2, 3)], rows)
 
 
 def _truth_cheaper_text(seqs) -> str:
     share = ', '.join(f"{_stat(seqs, k, 'robust', lambda *_: True, 'truth_cheaper')['mean']:.0f} %"
-                      f' (K = {k})' for k in FRAMES)
+                      f' (K = {k})' for k in frames_of(seqs))
     return ("Search or model? At robust's focal length and noise level, bodies fitted to the "
             "TRUE groups have a lower truncated cost than robust's own answer in "
             f'{share} of the windows (mean over sequences): there the search, or the spatial '
@@ -465,7 +474,7 @@ def timing_table(seqs, records, methods: Sequence[str]) -> str:
     rows = []
     for m in list(methods) + [ORACLE, ROBUST_ORACLE_F]:
         row: List[object] = [m]
-        for k in FRAMES:
+        for k in frames_of(seqs):
             sec = np.array([float(r['seconds']) for r in records
                             if r['method'] == m and r['k'] == k])
             cpu = np.array([float(r['cpu']) for r in records
@@ -474,7 +483,7 @@ def timing_table(seqs, records, methods: Sequence[str]) -> str:
                     1000 * float(np.median(sec)) if sec.size else math.nan,
                     float(np.sum(cpu))]
         rows.append(row)
-    headers = ['runner'] + [f'{t}, K={k}' for k in FRAMES
+    headers = ['runner'] + [f'{t}, K={k}' for k in frames_of(seqs)
                             for t in ('CPU ms (median)', 'wall ms (median)', 'CPU s total')]
     return common.markdown_table(headers, rows)
 
@@ -482,14 +491,14 @@ def timing_table(seqs, records, methods: Sequence[str]) -> str:
 def sequence_table(seqs, methods: Sequence[str]) -> str:
     """Long table: misclassification % per sequence (mean over windows), per method and K."""
     names = _names(methods)[:-1]               # methods + weighted oracle
-    headers = ['sequence', 'group', 'n', 'lines'] + [f'{m}, K={k}' for k in FRAMES
+    headers = ['sequence', 'group', 'n', 'lines'] + [f'{m}, K={k}' for k in frames_of(seqs)
                                                      for m in names]
     rows = []
     for seq in sorted({nm for (nm, _, _) in seqs}):
-        ref = seqs.get((seq, FRAMES[0], ORACLE)) or next(
+        ref = seqs.get((seq, frames_of(seqs)[0], ORACLE)) or next(
             s for (nm, _, _), s in seqs.items() if nm == seq)
         row: List[object] = [seq, ref['group'], ref['n'], f"{ref['lines']:.0f}"]
-        for k in FRAMES:
+        for k in frames_of(seqs):
             for m in names:
                 s = seqs.get((seq, k, m))
                 row.append('—' if s is None else f"{s['miscl']:.0f}" +
@@ -534,7 +543,7 @@ def build_report(records, methods: Sequence[str], args: argparse.Namespace, comm
     extra = {'Sequences': f'{n_seq}' + (' (--quick)' if args.quick else ' (Hopkins155, '
                                         'dancing excluded)'),
              'Windows per sequence and K': str(args.windows), 'K (frames per window)':
-             ', '.join(map(str, FRAMES)), 'Methods': ', '.join(methods),
+             ', '.join(map(str, frames_of(seqs))), 'Methods': ', '.join(methods),
              'Run time': f'{seconds:.0f} s wall with {args.jobs} worker process(es); '
                          f'{cpu:.0f} s CPU in solver and oracle calls',
              'Base seed': str(args.seed), 'Solver': solver or 'unknown'}
@@ -553,7 +562,7 @@ def build_report(records, methods: Sequence[str], args: argparse.Namespace, comm
                   'use). Its outlier bound is loose (few `-1`). The oracle rows are '
                   'rotation-only, so they do not bound `general`; see the `oracle general` '
                   'rows under Diagnostics.', '']
-    for k in FRAMES:
+    for k in frames_of(seqs):
         parts += [f'## Per group, K = {k}', '', 'Misclassification %, mean (median):', '',
                   group_table(seqs, methods, k),
                   'Checkerboard sequences by the motions in their names (object codes R/T, '
@@ -564,7 +573,7 @@ def build_report(records, methods: Sequence[str], args: argparse.Namespace, comm
                   'rotation-only fit, px-equivalent), focal lengths:', '',
                   diagnostics_table(seqs, k)]
     bound = ', '.join(f"{_stat(seqs, k, ORACLE, lambda *_: True, 'f_bound')['mean']:.0f} % "
-                      f'(K = {k})' for k in FRAMES)
+                      f'(K = {k})' for k in frames_of(seqs))
     parts += ['## Diagnostics: unassigned lines, focal length', '',
               'Misclassification %, mean over sequences (in parentheses: unassigned lines %, '
               'already counted as wrong in the first number). `-1 -> cheapest body` gives '
@@ -572,7 +581,7 @@ def build_report(records, methods: Sequence[str], args: argparse.Namespace, comm
               f'`{LOOSE.lstrip(", ")}` keeps lines whose cost is up to {LOOSE_BOUND:g}x the '
               'outlier bound (the rest stay -1); `robust, f = oracle f` runs '
               "the robust method with the focal length fixed at the oracle's; the "
-              '`oracle general` rows (K = 5 only) fit rotation AND translation to every true '
+              '`oracle general` rows (K >= 3 only) fit rotation AND translation to every true '
               "group at the oracle's focal length, with each line's 3D direction fitted (the "
               'old model) or marginalised (the model of `general`), and give every line to '
               'its cheapest body:', '',
@@ -607,9 +616,9 @@ def plot(records, methods: Sequence[str], path: pathlib.Path) -> None:
     seqs = per_sequence(records)
     cols = [(g, n) for g in BENCH_GROUPS for n in (2, 3)] + [('all', 2), ('all', 3)]
     names = _names(methods)
-    fig, axes = common.new_figure(len(FRAMES), width_per_panel=7.0, height=4.6)
+    fig, axes = common.new_figure(len(frames_of(seqs)), width_per_panel=7.0, height=4.6)
     width = 0.8 / len(names)
-    for ax, k in zip(axes, FRAMES):
+    for ax, k in zip(axes, frames_of(seqs)):
         stats = {m: [_stat(seqs, k, m, lambda _, s, g=g, n=n: s['n'] == n and
                            g in ('all', s['group'])) for g, n in cols] for m in names}
         shown = [j for j in range(len(cols)) if stats[names[0]][j]['n']]
@@ -656,6 +665,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--out', default=None, help='output folder (default docs/results)')
     p.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1),
                    help='worker processes (default min(2, cores))')
+    p.add_argument('--ks', default=None,
+                   help='comma-separated frames per window K (default '
+                        f'{",".join(map(str, FRAMES))})')
     p.add_argument('--seed', type=int, default=155, help='base seed (default 155)')
     p.add_argument('--save-records', metavar='FILE', default=None,
                    help='also write the raw per-window results (JSON)')
@@ -666,6 +678,13 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         args.windows = 1 if args.quick else 2
     if args.windows < 1 or args.jobs < 1:
         p.error('--windows and --jobs must be >= 1')
+    try:
+        args.ks = list(FRAMES) if args.ks is None else sorted(
+            {int(k) for k in args.ks.split(',') if k.strip()})
+    except ValueError:
+        p.error('--ks takes comma-separated integers')
+    if not args.ks or min(args.ks) < 2:
+        p.error('--ks: every K must be >= 2')
     return args
 
 
@@ -728,7 +747,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             common.eprint(f'hopkins: unknown sequences {sorted(missing)}')
             return 2
         paths = [p for p in paths if p.stem in wanted]
-    units = make_units(paths, args.windows, methods, args.seed)
+    units = make_units(paths, args.windows, methods, args.seed, args.ks)
     units.sort(key=lambda u: -(u.k * u.n_motions ** 2))   # biggest first: the pool ends evenly
     common.eprint(f'hopkins: {len(paths)} sequences, {len(units)} windows, '
                   f'{len(units) * len(methods)} solver calls, {args.jobs} process(es)')

@@ -303,6 +303,10 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
         scan = [_costs2(obs, idx, w0, t, sigma2)[0].sum()
                 for t in cands]                          # a few hundred starts, vectorised
         starts = cands[np.argsort(scan)[:keep]]
+        if sigma2 is not None and np.all(np.any(starts != 0.0, axis=1)):
+            # T = 0 (rotation only) always gets its own LM run: the cost is even in T, so
+            # no run started elsewhere reaches it, and at w0 its scan cost says little
+            starts = np.concatenate([starts, np.zeros((1, 3))])
     best = None
     for t in starts:
         fit = fit_body(obs, idx, w0, t, iterations, sigma2)
@@ -388,7 +392,13 @@ def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: 
         if idx.size < 3:
             continue
         if fitted[b]:
-            W[b], T[b], _ = fit_body(obs, idx, W[b], T[b], iterations, sigma2)
+            fit = fit_body(obs, idx, W[b], T[b], iterations, sigma2)
+            if sigma2 is not None and np.any(T[b] != 0.0):
+                # T = 0 is stationary in T (the cost is even in T), so LM never returns to
+                # it once a body has translated: try it as a second start
+                still = fit_body(obs, idx, W[b], np.zeros(3), iterations, sigma2)
+                fit = still if still[2] < fit[2] else fit
+            W[b], T[b], _ = fit
         else:
             W[b], T[b], _ = fit_body_multistart(
                 obs, idx, w_start(b), None if t_start is None else t_start(b),
