@@ -99,8 +99,15 @@ def fit_stats(stats: TrackStats, labels: np.ndarray, n: int) -> Tuple[np.ndarray
     key = (n, labels.dtype.str, labels.tobytes())
     hit = stats.fits.get(key)
     if hit is None:
+        if len(stats.fits) >= FIT_MEMO:
+            stats.fits.clear()       # the repeats come in a row: a few entries are enough
         hit = stats.fits[key] = _fit_stats(stats, labels, n)
     return hit[0].copy(), hit[1].copy()
+
+
+#: Labellings whose fits :func:`fit_stats` keeps (long K-subspaces runs would otherwise hold
+#: one N-label key per iteration until the solve ends).
+FIT_MEMO = 8
 
 
 def _fit_stats(stats: TrackStats, labels: np.ndarray, n: int) -> Tuple[np.ndarray, np.ndarray]:
