@@ -307,8 +307,14 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
             # T = 0 (rotation only) always gets its own LM run: the cost is even in T, so
             # no run started elsewhere reaches it, and at w0 its scan cost says little
             starts = np.concatenate([starts, np.zeros((1, 3))])
+    return _best_fit(obs, idx, w0, starts, iterations, sigma2)
+
+
+def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np.ndarray,
+              iterations: int, sigma2: Optional[float]) -> Tuple[np.ndarray, np.ndarray, float]:
+    """Run :func:`fit_body` from ``w0`` and each T of ``starts (S, 3)``; the cheapest wins."""
     best = None
-    for t in starts:
+    for t in starts:                                     # a few starts, not lines
         fit = fit_body(obs, idx, w0, t, iterations, sigma2)
         if best is None or fit[2] < best[2]:
             best = fit
@@ -392,13 +398,12 @@ def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: 
         if idx.size < 3:
             continue
         if fitted[b]:
-            fit = fit_body(obs, idx, W[b], T[b], iterations, sigma2)
+            starts = np.atleast_2d(T[b])
             if sigma2 is not None and np.any(T[b] != 0.0):
                 # T = 0 is stationary in T (the cost is even in T), so LM never returns to
                 # it once a body has translated: try it as a second start
-                still = fit_body(obs, idx, W[b], np.zeros(3), iterations, sigma2)
-                fit = still if still[2] < fit[2] else fit
-            W[b], T[b], _ = fit
+                starts = np.concatenate([starts, np.zeros((1, 3))])
+            W[b], T[b], _ = _best_fit(obs, idx, W[b], starts, iterations, sigma2)
         else:
             W[b], T[b], _ = fit_body_multistart(
                 obs, idx, w_start(b), None if t_start is None else t_start(b),
