@@ -316,8 +316,9 @@ class LineTracker:
       3 rather than 4: edges of faces turning into view are born a frame earlier (rendered
       own_centre s1 tracked-5 0.897 -> 0.911, but id switches 0.79 -> 1.22 %, brought back
       below 1 % by ``birth_clear_px``, the duplicate rule and the rescue rule below: 0.912,
-      0.93 %); the median frame is still one without detection (+0.1 ms CPU), the mean
-      frame costs ~+15 %.
+      0.85 %); the median frame is still one without detection (+0.1-0.2 ms CPU), the mean
+      frame costs ~+20 %; real-sequence median lifetimes are shorter (more short births:
+      hamburg_taxi 32 -> 19-25 frames, visp_cube 52 -> 50).
     * ``n_points``: KLT points per track; ``klt_win``: LK window, px of the LK image, which is
       the input resized by ``klt_scale``; ``klt_levels`` / ``klt_levels_predicted``: pyramid
       levels without / with a velocity prediction.
@@ -348,9 +349,11 @@ class LineTracker:
       mutual-best association to the unmatched tracks with gates widened by this factor
       (for carried and uncarried tracks alike; 1 = off), so a track drifted slightly off its
       edge keeps its id (3 rather than 2: fewer id switches on the rendered sequences, longer
-      lives on the real ones). Tracks whose carry the edge search confirmed this frame take
-      no part in it: they took detections of a parallel edge 3-6 px away when their own edge
-      went undetected (own_centre s0 id switches 0.94 -> 0.89 %, s1 0.89 -> 0.93 %).
+      lives on the real ones). A track whose carry the edge search confirmed this frame keeps
+      its line when it rescues a detection (the detection is absorbed, not born): such
+      tracks took detections of a parallel edge 3-6 px away when their own edge went
+      undetected (own_centre s1 id switches 0.89 -> 0.85 %; excluding them from the rescue
+      instead gave more births next to them and visp_cube median lifetime 50 -> 30).
     * ``birth_clear_px``: after the first frame, two unclaimed detections within
       ``angle_deg`` of each other, overlapping along the line (>= 0.3 of the shorter) and
       with centres at most this far apart across it are not born (0 = off). Such pairs
@@ -643,8 +646,12 @@ class LineTracker:
 
     # ------------------------------------------------------------------ association
     def _associate(self, trk: np.ndarray, det: np.ndarray, loose: np.ndarray) -> np.ndarray:
-        """Best track index (or -1) for each detection (D,); ``loose`` (T,) widens gates x2."""
+        """Best track index (or -1) for each detection (D,); ``loose`` (T,) widens gates x2.
+
+        Sets ``_absorbed`` (D,): detections rescued by a track confirmed on the image edges.
+        """
         t_n, d_n = trk.shape[0], det.shape[0]
+        self._absorbed = np.zeros(d_n, bool)
         if t_n == 0 or d_n == 0:
             return np.full(d_n, -1, np.intp)
         cost = self._cost(trk, det, np.where(loose, 2.0, 1.0))
@@ -655,9 +662,6 @@ class LineTracker:
             # takes the detection back instead of a new id being born on the edge
             taken = np.zeros(t_n, bool)
             taken[owner[owner >= 0]] = True
-            # a track whose carry the edge search confirmed is on its edge: a detection up to
-            # 3 gates away is a neighbouring edge's (it replaced the track's line)
-            taken |= self._confirmed
             ft = np.flatnonzero(~taken)          # = setdiff1d, without its sorting
             fd = np.nonzero(owner < 0)[0]
             if ft.size and fd.size:
@@ -668,6 +672,9 @@ class LineTracker:
                 bd = np.argmin(c2, axis=1)
                 ok = np.isfinite(c2[bt, np.arange(fd.size)]) & (bd[bt] == np.arange(fd.size))
                 owner[fd[ok]] = ft[bt[ok]]
+                # a track whose carry the edge search confirmed is on its edge: the detection
+                # so rescued is a neighbouring edge's, absorbed (not born) but not fused
+                self._absorbed[fd[ok]] = self._confirmed[ft[bt[ok]]]
         return owner
 
     def _cost(self, trk: np.ndarray, det: np.ndarray, scale: np.ndarray) -> np.ndarray:
@@ -845,11 +852,12 @@ class LineTracker:
         det = det.astype(np.float64)
         owner = self._associate(seg, det, ~carried)
         claimed = owner >= 0
+        fuse = claimed & ~self._absorbed
         matched = np.zeros(t_n, bool)
-        if claimed.any():
-            own = owner[claimed]
+        if fuse.any():
+            own = owner[fuse]
             matched[own] = True
-            fused = self._fuse(det[claimed], own, t_n, seg)
+            fused = self._fuse(det[fuse], own, t_n, seg)
             # tracks seen only by the detector: velocity from the previous segment
             lost = matched & ~carried
             old = self._seg
