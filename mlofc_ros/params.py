@@ -103,6 +103,11 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
     ParamSpec('min_segment_length', float, 20.0,
               'Shortest line segment detected and tracked, in pixels.',
               range=(2.0, 10000.0)),
+    ParamSpec('detect_every', int, 3,
+              'Run the line detector on every n-th frame; tracks are carried between. Larger '
+              'values cut the mean cost per frame (the detector is most of a detection frame) '
+              'but new edges get a track later.',
+              range=(1, 100)),
     ParamSpec('min_track_frames', int, 2,
               'A track must be seen in at least this many frames of the window to be segmented '
               '(capped at `window`).',

@@ -180,13 +180,15 @@ class Pipeline:
     # --- configuration -------------------------------------------------------------------
 
     def _make_tracker(self) -> LineTracker:
-        return LineTracker(min_length=float(self.params['min_segment_length']))
+        return LineTracker(min_length=float(self.params['min_segment_length']),
+                           detect_every=int(self.params['detect_every']))
 
     def reconfigure(self, **kwargs: Any) -> None:
         """Change parameters at run time; resets only what the change invalidates.
 
         ``window`` restarts the window; ``num_bodies`` restarts body numbering;
-        ``min_segment_length`` restarts the tracker and the window. Raises like the constructor,
+        ``min_segment_length`` restarts the tracker and the window; ``detect_every`` changes
+        only the detection schedule (tracks carry on). Raises like the constructor,
         changing nothing when any value is invalid.
         """
         unknown = sorted(set(kwargs) - set(_params.PARAMS))
@@ -199,6 +201,9 @@ class Pipeline:
             self._tracker = self._make_tracker()
             self.bodies.forget_tracks()
             self._restart_window()
+        elif 'detect_every' in changed:
+            # a schedule, not state: the tracks carry on
+            self._tracker.detect_every = int(self.params['detect_every'])
         if 'window' in changed:
             self._window = TrackWindow(self.params['window'])
             self._stamps = deque(maxlen=self.params['window'])

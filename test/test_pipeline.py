@@ -337,6 +337,11 @@ def test_constructor_and_reconfigure_validate_like_the_node():
     assert r.window_fill == 1
     lengths = np.hypot(*(r.segments[:, 2:] - r.segments[:, :2]).T)
     assert np.all(lengths >= 30.0 - 1e-3)
+    ids = set(r.track_ids.tolist())
+    p.reconfigure(detect_every=5)                                     # a schedule: no reset
+    r = p.process(seq.frames[7], seq.stamps[7], seq.camera)
+    assert r.window_fill == 2 and p._tracker.detect_every == 5
+    assert ids & set(r.track_ids.tolist())
 
 
 def test_distorted_camera_is_undistorted_before_solving():

@@ -460,6 +460,12 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     return ap.parse_args(list(argv))
 
 
+def _nth(k: int) -> str:
+    """Return the English ordinal of ``k`` (1st, 2nd, 3rd, 4th, ..., 11th, 12th, 21st)."""
+    suffix = 'th' if 10 <= k % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th')
+    return f'{k}{suffix}'
+
+
 def _detector_table(rows: Sequence[Dict[str, object]]) -> str:
     return common.markdown_table(
         ['detector (+ merge, >= 20 px)', 'recall GT>=30', 'recall GT>=40', 'precision',
@@ -571,13 +577,15 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               'detections, and every missed birth is a missed edge for several frames. '
               'LSD at full resolution (`scale=1.0`) has the best recall and the lowest line '
               'error of all candidates, at about 2x the cost of the OpenCV default; run on '
-              'every 4th frame its cost per frame is about half the LSD default. LSD at scale '
+              'every 3rd frame (the tracker default) its cost per frame is about two thirds '
+              'of the LSD default. LSD at scale '
               '0.5 (or on a half-size image) is 2x cheaper than the default but misses '
               'a tenth of the edges and doubles the line error. The contrib detectors (FLD, '
               'EDLines) are 2-2.5x cheaper than the LSD default with recall between LSD 0.8 '
               'and LSD 0.5 and twice the line error of LSD 1.0; in the tracker (detection on '
               'every 2nd frame, same total budget or less) they gave 4-5 points lower '
-              '`tracked 5` than LSD 1.0 every 4th frame, so they do not win clearly enough to '
+              '`tracked 5` than LSD 1.0 every 4th frame (measured when that was the default), '
+              'so they do not win clearly enough to '
               "add a dependency (`LineDetector(backend='edlines')` works when "
               'opencv-contrib is installed).', '']
     lines += ['## Tracking on rendered sequences (640x480, background + boxes)', '',
@@ -612,7 +620,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               '`LSD ref`: the raw OpenCV LSD default (`cv2.createLineSegmentDetector()`) run on '
               'the same frame just before, in the same run; the `/ LSD` columns are the '
               'ratios of medians / means. `detect` = the detector on the frames where it runs '
-              f'(every {tracker.detect_every}th), `track` = everything else (edge search, KLT '
+              f'(every {_nth(tracker.detect_every)}), `track` = everything else (edge search, KLT '
               'for new or lost tracks, association, births). CPU = thread CPU time (less '
               'sensitive to other processes).', '',
               common.markdown_table(

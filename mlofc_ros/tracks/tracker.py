@@ -424,6 +424,8 @@ class LineTracker:
                              f'and {grow_step_px}')
         self.grow_steps = int(grow_steps)
         self.grow_step_px = float(grow_step_px)
+        if not birth_clear_px >= 0:
+            raise ValueError(f'birth_clear_px must be >= 0, got {birth_clear_px}')
         self.birth_clear_px = float(birth_clear_px)
         self._t = (np.arange(self.n_points) + 0.5) / self.n_points      # (P,) along segment
         self.reset()
@@ -437,6 +439,8 @@ class LineTracker:
         self._misses = np.zeros(0, np.int32)
         self._omega = np.zeros(0)             # smoothed turn per frame, rad
         self._age = np.zeros(0, np.int32)
+        self._confirmed = np.zeros(0, bool)   # this frame: carried and found on the image edges
+        self._absorbed = np.zeros(0, bool)    # this frame's detections a confirmed track rescued
         self._next_id = 0
         self._prev: Optional[np.ndarray] = None
         self._cur: Optional[np.ndarray] = None
@@ -606,7 +610,7 @@ class LineTracker:
         t_n = self._seg.shape[0]
         new = self._seg + self._vel
         ok = np.zeros(t_n, bool)
-        self._confirmed = np.zeros(t_n, bool)     # carried and found on the image edges
+        self._confirmed = np.zeros(t_n, bool)
         if t_n == 0 or self._prev is None:
             return new, ok
         sel = np.nonzero(self._has_vel)[0]
