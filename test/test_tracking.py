@@ -172,3 +172,31 @@ def test_unresolvable_edges_marks_only_close_parallel_overlapping_pairs():
                    [50.0, -50.0, 50.0, 50.0]])   # 4: crosses them all
     np.testing.assert_array_equal(unresolvable_edges(gt), [True, True, False, True, False])
     assert not unresolvable_edges(gt[:1]).any()
+
+
+def test_crowded_parallel_births_wait_but_not_on_the_first_frame():
+    from mlofc_ros.segments.detect import LineDetector
+
+    pair = np.array([[100, 100, 300, 100], [100, 102.5, 300, 102.5],    # 2.5 px apart
+                     [100, 300, 300, 200]], np.float32)                  # a lone line
+    blank = np.full((400, 400), 128, np.uint8)
+
+    def tracker(clear, first_empty):
+        calls = []
+
+        def detect(gray):
+            calls.append(1)
+            return np.zeros((0, 4), np.float32) if first_empty and len(calls) == 1 else pair
+        det = LineDetector(backend=detect, merge=False, orient=False)
+        return LineTracker(detector=det, birth_clear_px=clear, detect_every=1)
+
+    tr = tracker(3.0, first_empty=True)
+    assert len(tr.update(blank)[0]) == 0
+    ids, seg = tr.update(blank)
+    assert len(ids) == 1 and np.allclose(seg[0], pair[2])       # the pair waits
+    tr = tracker(0.0, first_empty=True)                           # 0 = off
+    tr.update(blank)
+    assert len(tr.update(blank)[0]) == 3
+    assert len(tracker(3.0, first_empty=False).update(blank)[0]) == 3   # frame 0: all born
+    with pytest.raises(ValueError, match='birth_clear_px'):
+        LineTracker(birth_clear_px=-1.0)
