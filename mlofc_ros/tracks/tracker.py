@@ -43,7 +43,7 @@ Segments are ``(u1, v1, u2, v2)`` px in the input image. A track keeps the orien
 born with (the detector's: brighter side on the left).
 """
 from functools import lru_cache
-from typing import Dict, Optional, Tuple, Union
+from typing import Dict, NamedTuple, Optional, Tuple, Union
 
 import cv2
 import numpy as np
@@ -297,6 +297,41 @@ def grow_lines(image: np.ndarray, seg: np.ndarray, step: float = 2.0, n_steps: i
     grown = step * run
     out = np.concatenate([s[:, :2] - grown[:, :1] * u, s[:, 2:] + grown[:, 1:] * u], axis=1)
     return out, grown
+
+
+class _Lines(NamedTuple):
+    """Endpoints, lengths, unit directions and centres of segments (M, 4) px, each (M,)."""
+
+    x1: np.ndarray
+    y1: np.ndarray
+    x2: np.ndarray
+    y2: np.ndarray
+    length: np.ndarray
+    ux: np.ndarray
+    uy: np.ndarray
+    cx: np.ndarray
+    cy: np.ndarray
+
+
+def _parallel_pairs(seg: np.ndarray, angle_deg: float
+                    ) -> Tuple[np.ndarray, np.ndarray, _Lines]:
+    """Index pairs ``(i, j)`` of segments (M, 4) within ``angle_deg`` (mod 180) and their lines."""
+    x1, y1, x2, y2 = seg.T
+    length = np.maximum(np.hypot(x2 - x1, y2 - y1), 1e-9)
+    ux, uy = (x2 - x1) / length, (y2 - y1) / length
+    theta = np.mod(np.arctan2(uy, ux), np.pi)
+    i, j = _angle_pairs(theta, np.full(seg.shape[0], np.deg2rad(angle_deg)), np.pi)
+    lines = _Lines(x1, y1, x2, y2, length, ux, uy, 0.5 * (x1 + x2), 0.5 * (y1 + y2))
+    return i, j, lines
+
+
+def _overlap(g: _Lines, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Overlap of segments ``p`` with segments ``q`` along q's lines, over the shorter length."""
+    a = (g.x1[p] - g.cx[q]) * g.ux[q] + (g.y1[p] - g.cy[q]) * g.uy[q]
+    b = (g.x2[p] - g.cx[q]) * g.ux[q] + (g.y2[p] - g.cy[q]) * g.uy[q]
+    lo = np.maximum(np.minimum(a, b), -0.5 * g.length[q])
+    hi = np.minimum(np.maximum(a, b), 0.5 * g.length[q])
+    return (hi - lo) / np.minimum(g.length[p], g.length[q])
 
 
 class LineTracker:
@@ -759,52 +794,31 @@ class LineTracker:
         shorter one along the first's line, whose centre lies between 0.25 px (a duplicate
         fragment of the same line is no neighbour) and ``birth_clear_px`` across that line.
         """
-        b_n = born.shape[0]
-        out = np.zeros(b_n, bool)
-        if b_n < 2:
+        out = np.zeros(born.shape[0], bool)
+        if born.shape[0] < 2:
             return out
-        x1, y1, x2, y2 = born.T
-        length = np.maximum(np.hypot(x2 - x1, y2 - y1), 1e-9)
-        ux, uy = (x2 - x1) / length, (y2 - y1) / length
-        theta = np.mod(np.arctan2(uy, ux), np.pi)
-        i, j = _angle_pairs(theta, np.full(b_n, np.deg2rad(self.angle_deg)), np.pi)
-        cx, cy = 0.5 * (x1 + x2), 0.5 * (y1 + y2)
-        off = np.abs((cx[j] - cx[i]) * uy[i] - (cy[j] - cy[i]) * ux[i])
-        a = (x1[j] - cx[i]) * ux[i] + (y1[j] - cy[i]) * uy[i]
-        b = (x2[j] - cx[i]) * ux[i] + (y2[j] - cy[i]) * uy[i]
-        lo = np.maximum(np.minimum(a, b), -0.5 * length[i])
-        hi = np.minimum(np.maximum(a, b), 0.5 * length[i])
-        over = (hi - lo) / np.minimum(length[i], length[j])
+        i, j, g = _parallel_pairs(born, self.angle_deg)
+        off = np.abs((g.cx[j] - g.cx[i]) * g.uy[i] - (g.cy[j] - g.cy[i]) * g.ux[i])
+        over = _overlap(g, j, i)
         hit = (off > 0.25) & (off <= self.birth_clear_px) & (over >= 0.3)
         out[i[hit]] = True
         return out
 
     def _duplicates(self, seg: np.ndarray, age: np.ndarray) -> np.ndarray:
         """Mask (T,) of tracks lying on the same line as an older (or as old, longer) track."""
-        t_n = seg.shape[0]
-        dup = np.zeros(t_n, bool)
-        if t_n < 2:
+        dup = np.zeros(seg.shape[0], bool)
+        if seg.shape[0] < 2:
             return dup
-        x1, y1, x2, y2 = seg.T
-        length = np.maximum(np.hypot(x2 - x1, y2 - y1), 1e-9)
-        ux, uy = (x2 - x1) / length, (y2 - y1) / length
-        theta = np.mod(np.arctan2(uy, ux), np.pi)
-        width = np.full(t_n, np.deg2rad(self.angle_deg))
-        i, j = _angle_pairs(theta, width, np.pi)
+        i, j, g = _parallel_pairs(seg, self.angle_deg)
+        length = g.length
         # i is the younger one (smaller age; same age: shorter, or as long and later index):
         # tracks born together are told apart by the line they hold, not by their order
         keep = (age[i] < age[j]) | ((age[i] == age[j]) & (
             (length[i] < length[j]) | ((length[i] == length[j]) & (i > j))))
         i, j = i[keep], j[keep]
-        cx, cy = 0.5 * (x1 + x2), 0.5 * (y1 + y2)
-        off = np.maximum(np.abs((x1[i] - cx[j]) * uy[j] - (y1[i] - cy[j]) * ux[j]),
-                         np.abs((x2[i] - cx[j]) * uy[j] - (y2[i] - cy[j]) * ux[j]))
-        a = (x1[i] - cx[j]) * ux[j] + (y1[i] - cy[j]) * uy[j]
-        b = (x2[i] - cx[j]) * ux[j] + (y2[i] - cy[j]) * uy[j]
-        lo = np.maximum(np.minimum(a, b), -0.5 * length[j])
-        hi = np.minimum(np.maximum(a, b), 0.5 * length[j])
-        over = (hi - lo) / np.minimum(length[i], length[j])
-        hit = (off <= 0.5 * self.distance_px) & (over >= 0.5)
+        off = np.maximum(np.abs((g.x1[i] - g.cx[j]) * g.uy[j] - (g.y1[i] - g.cy[j]) * g.ux[j]),
+                         np.abs((g.x2[i] - g.cx[j]) * g.uy[j] - (g.y2[i] - g.cy[j]) * g.ux[j]))
+        hit = (off <= 0.5 * self.distance_px) & (_overlap(g, i, j) >= 0.5)
         dup[i[hit]] = True
         return dup
 
