@@ -303,16 +303,18 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
         scan = [_costs2(obs, idx, w0, t, sigma2)[0].sum()
                 for t in cands]                          # a few hundred starts, vectorised
         starts = cands[np.argsort(scan)[:keep]]
-        if sigma2 is not None and np.all(np.any(starts != 0.0, axis=1)):
-            # T = 0 (rotation only) always gets its own LM run: the cost is even in T, so
-            # no run started elsewhere reaches it, and at w0 its scan cost says little
-            starts = np.concatenate([starts, np.zeros((1, 3))])
     return _best_fit(obs, idx, w0, starts, iterations, sigma2)
 
 
 def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np.ndarray,
               iterations: int, sigma2: Optional[float]) -> Tuple[np.ndarray, np.ndarray, float]:
-    """Run :func:`fit_body` from ``w0`` and each T of ``starts (S, 3)``; the cheapest wins."""
+    """Run :func:`fit_body` from ``w0`` and each T of ``starts (S, 3)``; the cheapest wins.
+
+    With marginalised directions (``sigma2``) T = 0 is always one of the starts: the cost is
+    even in T, so T = 0 is stationary and no LM run started at another T returns to it.
+    """
+    if sigma2 is not None and np.all(np.any(starts != 0.0, axis=1)):
+        starts = np.concatenate([starts, np.zeros((1, 3))])
     best = None
     for t in starts:                                     # a few starts, not lines
         fit = fit_body(obs, idx, w0, t, iterations, sigma2)
@@ -398,12 +400,7 @@ def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: 
         if idx.size < 3:
             continue
         if fitted[b]:
-            starts = np.atleast_2d(T[b])
-            if sigma2 is not None and np.any(T[b] != 0.0):
-                # T = 0 is stationary in T (the cost is even in T), so LM never returns to
-                # it once a body has translated: try it as a second start
-                starts = np.concatenate([starts, np.zeros((1, 3))])
-            W[b], T[b], _ = _best_fit(obs, idx, W[b], starts, iterations, sigma2)
+            W[b], T[b], _ = _best_fit(obs, idx, W[b], np.atleast_2d(T[b]), iterations, sigma2)
         else:
             W[b], T[b], _ = fit_body_multistart(
                 obs, idx, w_start(b), None if t_start is None else t_start(b),
