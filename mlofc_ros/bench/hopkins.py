@@ -366,11 +366,12 @@ def _names(methods: Sequence[str]) -> List[str]:
 
 def headline_table(seqs, methods: Sequence[str]) -> str:
     """Mean (median) misclassification % over all 2- and 3-motion sequences, K = 2 and 5."""
-    headers = ['method'] + [f'{n} motions, K={k}' for k in frames_of(seqs) for n in (2, 3)]
+    ks = frames_of(seqs)
+    headers = ['method'] + [f'{n} motions, K={k}' for k in ks for n in (2, 3)]
     rows = []
     for m in _names(methods):
         rows.append([m] + [_cell(_stat(seqs, k, m, lambda _, s, n=n: s['n'] == n))
-                           for k in frames_of(seqs) for n in (2, 3)])
+                           for k in ks for n in (2, 3)])
     for name, two, three in REFERENCES:
         cells = [f'{two:.1f}', '—' if three is None else f'{three:.1f}']
         rows.append([f'*reference: {name}*'] + cells + cells)
@@ -379,6 +380,7 @@ def headline_table(seqs, methods: Sequence[str]) -> str:
 
 def diagnostic_table(seqs, methods: Sequence[str]) -> str:
     """Mean misclassification % (mean unassigned %) of the diagnostic runners."""
+    ks = frames_of(seqs)
     runners = []
     for m in WITH_OUTLIERS:
         if m in methods:
@@ -391,7 +393,7 @@ def diagnostic_table(seqs, methods: Sequence[str]) -> str:
     rows = []
     for m in runners:
         row: List[object] = [m]
-        for k in frames_of(seqs):
+        for k in ks:
             for n in (2, 3):
                 def keep(_, s, n=n) -> bool:
                     return s['n'] == n
@@ -399,13 +401,14 @@ def diagnostic_table(seqs, methods: Sequence[str]) -> str:
                 row.append('—' if not miscl['n'] else f"{miscl['mean']:.1f} "
                            f"({_stat(seqs, k, m, keep, 'unassigned')['mean']:.1f})")
         rows.append(row)
-    return common.markdown_table(['runner'] + [f'{n} motions, K={k}' for k in frames_of(seqs)
+    return common.markdown_table(['runner'] + [f'{n} motions, K={k}' for k in ks
                                                for n in (2, 3)], rows)
 
 
 def _truth_cheaper_text(seqs) -> str:
+    ks = frames_of(seqs)
     share = ', '.join(f"{_stat(seqs, k, 'robust', lambda *_: True, 'truth_cheaper')['mean']:.0f} %"
-                      f' (K = {k})' for k in frames_of(seqs))
+                      f' (K = {k})' for k in ks)
     return ("Search or model? At robust's focal length and noise level, bodies fitted to the "
             "TRUE groups have a lower truncated cost than robust's own answer in "
             f'{share} of the windows (mean over sequences): there the search, or the spatial '
@@ -471,10 +474,11 @@ def diagnostics_table(seqs, k: int) -> str:
 
 def timing_table(seqs, records, methods: Sequence[str]) -> str:
     """Median wall / CPU ms per solve and total CPU s per method, K = 2 and 5."""
+    ks = frames_of(seqs)
     rows = []
     for m in list(methods) + [ORACLE, ROBUST_ORACLE_F]:
         row: List[object] = [m]
-        for k in frames_of(seqs):
+        for k in ks:
             sec = np.array([float(r['seconds']) for r in records
                             if r['method'] == m and r['k'] == k])
             cpu = np.array([float(r['cpu']) for r in records
@@ -483,22 +487,23 @@ def timing_table(seqs, records, methods: Sequence[str]) -> str:
                     1000 * float(np.median(sec)) if sec.size else math.nan,
                     float(np.sum(cpu))]
         rows.append(row)
-    headers = ['runner'] + [f'{t}, K={k}' for k in frames_of(seqs)
+    headers = ['runner'] + [f'{t}, K={k}' for k in ks
                             for t in ('CPU ms (median)', 'wall ms (median)', 'CPU s total')]
     return common.markdown_table(headers, rows)
 
 
 def sequence_table(seqs, methods: Sequence[str]) -> str:
     """Long table: misclassification % per sequence (mean over windows), per method and K."""
+    ks = frames_of(seqs)
     names = _names(methods)[:-1]               # methods + weighted oracle
-    headers = ['sequence', 'group', 'n', 'lines'] + [f'{m}, K={k}' for k in frames_of(seqs)
+    headers = ['sequence', 'group', 'n', 'lines'] + [f'{m}, K={k}' for k in ks
                                                      for m in names]
     rows = []
     for seq in sorted({nm for (nm, _, _) in seqs}):
-        ref = seqs.get((seq, frames_of(seqs)[0], ORACLE)) or next(
+        ref = seqs.get((seq, ks[0], ORACLE)) or next(
             s for (nm, _, _), s in seqs.items() if nm == seq)
         row: List[object] = [seq, ref['group'], ref['n'], f"{ref['lines']:.0f}"]
-        for k in frames_of(seqs):
+        for k in ks:
             for m in names:
                 s = seqs.get((seq, k, m))
                 row.append('—' if s is None else f"{s['miscl']:.0f}" +
@@ -539,11 +544,12 @@ def build_report(records, methods: Sequence[str], args: argparse.Namespace, comm
                  seconds: float, n_seq: int, solver: str = '') -> str:
     """Whole Markdown report."""
     seqs = per_sequence(records)
+    ks = frames_of(seqs)
     cpu = float(np.nansum([float(r['cpu']) for r in records]))
     extra = {'Sequences': f'{n_seq}' + (' (--quick)' if args.quick else ' (Hopkins155, '
                                         'dancing excluded)'),
              'Windows per sequence and K': str(args.windows), 'K (frames per window)':
-             ', '.join(map(str, frames_of(seqs))), 'Methods': ', '.join(methods),
+             ', '.join(map(str, ks)), 'Methods': ', '.join(methods),
              'Run time': f'{seconds:.0f} s wall with {args.jobs} worker process(es); '
                          f'{cpu:.0f} s CPU in solver and oracle calls',
              'Base seed': str(args.seed), 'Solver': solver or 'unknown'}
@@ -562,7 +568,7 @@ def build_report(records, methods: Sequence[str], args: argparse.Namespace, comm
                   'use). Its outlier bound is loose (few `-1`). The oracle rows are '
                   'rotation-only, so they do not bound `general`; see the `oracle general` '
                   'rows under Diagnostics.', '']
-    for k in frames_of(seqs):
+    for k in ks:
         parts += [f'## Per group, K = {k}', '', 'Misclassification %, mean (median):', '',
                   group_table(seqs, methods, k),
                   'Checkerboard sequences by the motions in their names (object codes R/T, '
@@ -573,7 +579,7 @@ def build_report(records, methods: Sequence[str], args: argparse.Namespace, comm
                   'rotation-only fit, px-equivalent), focal lengths:', '',
                   diagnostics_table(seqs, k)]
     bound = ', '.join(f"{_stat(seqs, k, ORACLE, lambda *_: True, 'f_bound')['mean']:.0f} % "
-                      f'(K = {k})' for k in frames_of(seqs))
+                      f'(K = {k})' for k in ks)
     parts += ['## Diagnostics: unassigned lines, focal length', '',
               'Misclassification %, mean over sequences (in parentheses: unassigned lines %, '
               'already counted as wrong in the first number). `-1 -> cheapest body` gives '
@@ -614,11 +620,12 @@ def build_report(records, methods: Sequence[str], args: argparse.Namespace, comm
 def plot(records, methods: Sequence[str], path: pathlib.Path) -> None:
     """Bar chart: mean misclassification per group (and all) per method, one panel per K."""
     seqs = per_sequence(records)
+    ks = frames_of(seqs)
     cols = [(g, n) for g in BENCH_GROUPS for n in (2, 3)] + [('all', 2), ('all', 3)]
     names = _names(methods)
-    fig, axes = common.new_figure(len(frames_of(seqs)), width_per_panel=7.0, height=4.6)
+    fig, axes = common.new_figure(len(ks), width_per_panel=7.0, height=4.6)
     width = 0.8 / len(names)
-    for ax, k in zip(axes, frames_of(seqs)):
+    for ax, k in zip(axes, ks):
         stats = {m: [_stat(seqs, k, m, lambda _, s, g=g, n=n: s['n'] == n and
                            g in ('all', s['group'])) for g, n in cols] for m in names}
         shown = [j for j in range(len(cols)) if stats[names[0]][j]['n']]
