@@ -25,28 +25,11 @@ about the camera centre maps ``m`` to ``m' = R m`` exactly. With the Cayley vect
 so the row ``y_j = [m_bar x e_j ; -(e_j . g)]`` of R^4 is orthogonal to ``u = [c ; 1]``.
 """
 from dataclasses import dataclass, field
-from typing import Tuple
+from typing import Optional, Tuple
 
 import numpy as np
 
 Intrinsics = Tuple[float, float, float, float]
-
-
-def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross`` of ``(..., 3)`` arrays: the same products and differences, less overhead."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a1 * b2 - a2 * b1
-    out[..., 1] = a2 * b0 - a0 * b2
-    out[..., 2] = a0 * b1 - a1 * b0
-    return out
-
-
-def _norm3(v: np.ndarray) -> np.ndarray:
-    """``np.linalg.norm(v, axis=-1, keepdims=True)`` of ``(..., 3)``: the same sum, in order."""
-    x, y, z = v[..., 0], v[..., 1], v[..., 2]
-    return np.sqrt(x * x + y * y + z * z)[..., None]
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -128,39 +111,164 @@ def interpretation_normals(tracks: np.ndarray, intrinsics: Intrinsics,
         Covariance of ``m`` from isotropic endpoint noise (rank 2: orthogonal to ``m``). Short
         segments and segments far from the principal point are noisier.
     """
-    xa = normalise_points(tracks[..., 0:2], intrinsics)
-    xb = normalise_points(tracks[..., 2:4], intrinsics)
-    n = _cross3(xa, xb)
-    norm = _norm3(n)
+    m, cov = _normals(np.asarray(tracks, dtype=float), intrinsics, endpoint_sigma)
+    return _per_track(m), _per_track(cov)
+
+
+def _per_track(a: np.ndarray) -> np.ndarray:
+    """Copy a slot-major array ``(..., K, N)`` (see below) to ``(N, K, ...)``."""
+    out = np.empty(a.shape[:-3:-1] + a.shape[:-2])
+    # copying through a view of the output that matches the input iterates in the input's
+    # order: faster than a C-order pass with inner loops of length 2-3
+    np.copyto(out.transpose(tuple(range(2, a.ndim)) + (1, 0)), a)
+    return out
+
+
+# The private helpers below work on component-major, slot-major arrays: ``(3, K, N)`` for
+# vectors of every frame and track, ``(3, 3, K, N)`` for matrices (``(..., S, N)`` for the
+# ``S = K - 1`` frame pairs). Every numpy call then runs over all tracks and frames with a long
+# contiguous inner loop, where the per-track layouts ``(..., 3)`` and ``(..., 3, 3)`` (stacked
+# 3x3 matmuls, einsum) run inner loops of length 2-3 and are several times slower at N ~ 200;
+# and a frame (pair) is a contiguous ``(N,)`` slice for the loops over frames below. At these
+# sizes the cost is mostly the number of numpy calls, so components are handled together
+# where the arithmetic allows (e.g. :func:`_cross5`).
+
+
+def _normals(tracks: np.ndarray, intrinsics: Intrinsics, endpoint_sigma: float = 1.0
+             ) -> Tuple[np.ndarray, np.ndarray]:
+    """Compute :func:`interpretation_normals` slot-major: ``m (3, K, N)``, ``cov (3, 3, K, N)``.
+
+    The arithmetic is the stacked form's, operation for operation: bit-identical results.
+    """
+    fx, fy, cx, cy = intrinsics
+    x = np.empty((4,) + tracks.shape[1::-1])                    # x_a0, x_a1, x_b0, x_b1
+    np.subtract(tracks.transpose(2, 1, 0), np.array([cx, cy, cx, cy])[:, None, None], out=x)
+    x /= np.array([fx, fy, fx, fy])[:, None, None]
+    # n = x_a x x_b with x_2 = 1 (the factors 1 of the general cross product are exact)
+    m = np.empty((3,) + x.shape[1:])
+    np.subtract(x[1:3], x[3::-3], out=m[:2])                    # x_a1 - x_b1, x_b0 - x_a0
+    np.subtract(x[0] * x[3], x[1] * x[2], out=m[2])
+    norm = _norm(m)
     with np.errstate(invalid='ignore', divide='ignore'):
-        m = n / norm
-    # consistent sign along each track: compare with the previous present frame (vectorised
-    # over tracks; the loop runs over the few frames of the window)
-    last = np.full(m.shape[0:1] + (3,), np.nan)
-    for k in range(m.shape[1]):
-        flip = np.einsum('ij,ij->i', m[:, k], last) < 0
-        m[flip, k] *= -1.0
-        ok = np.isfinite(m[:, k, 0])
-        last[ok] = m[ok, k]
+        m /= norm
+    _consistent_signs(m, np.isfinite(m[0]))
     # d m = P / |n| d n with P = I - m m^T,  d n = -[x_b]x d x_a + [x_a]x d x_b,
     # d x = K2 d(u, v) (K2: first two columns of K^-1). So cov = s^2 P Q P / |n|^2 with
-    # Q = sum over both endpoints of [x]x K2 K2^T [x]x^T, written out (x_2 = 1) and expanded:
-    # elementwise products instead of chains of stacked 3x3 matmuls (4x faster at N = 200)
+    # Q = sum over both endpoints of [x]x K2 K2^T [x]x^T, written out (x_2 = 1) and expanded
     # numpy scalars: overflow of extreme (fuzzed) focal lengths gives inf, as the matmuls did
-    ifx2, ify2 = np.float64(1.0 / intrinsics[0]) ** 2, np.float64(1.0 / intrinsics[1]) ** 2
-    q = np.zeros(m.shape + (3,))
-    q[..., 0, 0] = 2.0 * ify2
-    q[..., 1, 1] = 2.0 * ifx2
-    q[..., 0, 2] = q[..., 2, 0] = -(xa[..., 0] + xb[..., 0]) * ify2
-    q[..., 1, 2] = q[..., 2, 1] = -(xa[..., 1] + xb[..., 1]) * ifx2
-    q[..., 2, 2] = ((xa[..., 1] ** 2 + xb[..., 1] ** 2) * ifx2
-                    + (xa[..., 0] ** 2 + xb[..., 0] ** 2) * ify2)
-    qm = np.einsum('...ij,...j->...i', q, m)
-    mqm = np.einsum('...i,...i->...', m, qm)
-    cov = q - m[..., :, None] * qm[..., None, :] - qm[..., :, None] * m[..., None, :]
-    cov += mqm[..., None, None] * (m[..., :, None] * m[..., None, :])
-    cov *= (endpoint_sigma ** 2 / norm ** 2)[..., None]
+    ifx2, ify2 = np.float64(1.0 / fx) ** 2, np.float64(1.0 / fy) ** 2
+    scale = np.array([ify2, ifx2])[:, None, None]               # of Q's rows 0 and 1
+    q2 = x[:2] + x[2:]
+    q2 *= -scale                                                 # q02, q12
+    sq = x * x
+    sums = sq[:2] + sq[2:]
+    sums *= scale
+    q22 = sums[1] + sums[0]
+    # qm = Q m and m . qm: 3-term sums in the order einsum adds them on (..., 3) arrays,
+    # (t_0 + t_2) + t_1 (q01 = 0 adds exactly nothing)
+    qm = np.empty_like(m)
+    np.multiply(2.0 * scale, m[:2], out=qm[:2])                  # q00 m0, q11 m1
+    qm[:2] += q2 * m[2]
+    t = q2 * m[:2]
+    np.add(t[0], q22 * m[2], out=qm[2])
+    qm[2] += t[1]
+    t = m * qm
+    mqm = t[0] + t[2]
+    mqm += t[1]
+    # cov = (Q - m qm^T) - qm m^T + (m . qm) m m^T with whole-array outer products;
+    # -a + q is q - a exactly
+    mq = m[:, None] * qm[None, :]
+    cov = np.negative(mq)
+    cov.reshape((9,) + m.shape[1:])[0:5:4] += 2.0 * scale       # q00, q11
+    cov[:2, 2] += q2
+    cov[2, :2] += q2
+    cov[2, 2] += q22
+    cov -= mq.transpose(1, 0, 2, 3)
+    mm = np.multiply(m[:, None], m[None, :], out=mq)
+    mm *= mqm
+    cov += mm
+    cov *= endpoint_sigma ** 2 / norm ** 2
     return m, cov
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Norms ``(...)`` of component-major vectors ``(3, ...)``, summed in the order 0, 1, 2."""
+    sq = v * v
+    out = sq[0] + sq[1]
+    out += sq[2]
+    return np.sqrt(out, out=out)
+
+
+def _consistent_signs(m: np.ndarray, ok: np.ndarray) -> None:
+    """Flip normals ``m (3, K, N)`` in place so that ``m_k . m_prev > 0`` along each track.
+
+    ``m_prev``: the previous present frame (``ok (K, N)``), after its own flip. The sign of
+    frame k is the product of the signs of the raw dot products along the track, so one
+    cumulative product replaces a loop over frames; an exactly zero dot product (which never
+    flips, whatever the earlier flips) falls back to that loop.
+    """
+    prev = m[:, :-1]
+    if not ok.all():
+        # the previous present frame's raw normal (NaN before the first): forward fill
+        prev = prev.copy()
+        gap = ~ok
+        for k in range(1, prev.shape[1]):
+            np.copyto(prev[:, k], prev[:, k - 1], where=gap[k])
+    t = m[:, 1:] * prev
+    dot = t[0] + t[2]                                            # einsum's order (above)
+    dot += t[1]
+    flip = dot < 0.0
+    if not flip.any():
+        return                                                   # the usual case
+    if (dot == 0.0).any():
+        _consistent_signs_loop(m, ok)
+        return
+    sign = np.where(flip, -1.0, 1.0)
+    np.multiply.accumulate(sign, axis=0, out=sign)
+    m[:, 1:] *= sign
+
+
+def _consistent_signs_loop(m: np.ndarray, ok: np.ndarray) -> None:
+    """Compute :func:`_consistent_signs` frame by frame (vectorised over tracks)."""
+    last = np.full((3, m.shape[2]), np.nan)
+    for k in range(m.shape[1]):
+        mk = m[:, k]
+        t = mk * last
+        dot = t[0] + t[2]
+        dot += t[1]
+        np.negative(mk, out=mk, where=dot < 0)
+        np.copyto(last, mk, where=ok[k])
+
+
+def _cross5(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """Write ``a x b`` (``(3, ...)``) given rolled vectors ``(5, ...)`` ``(v0, v1, v2, v0, v1)``.
+
+    The three components in three numpy calls (slices of the rolled arrays), with the products
+    and differences of ``np.cross``.
+    """
+    np.multiply(a[1:4], b[2:5], out=out)
+    out -= a[2:5] * b[1:4]
+
+
+def _pair_basis(m: np.ndarray) -> np.ndarray:
+    """Compute :func:`orthonormal_pair` component-major: ``m (3, ...)`` -> ``E (5, 2, ...)``.
+
+    ``E`` is rolled (rows 3, 4 repeat rows 0, 1) for :func:`_cross5`.
+    """
+    u = np.empty((5,) + m.shape[1:])
+    np.divide(m, _norm(m), out=u[:3])
+    u[3:] = u[:2]
+    idx = np.argmin(np.abs(u[:3]), axis=0)
+    # the one-hot axis (cheaper than a put); the cross product with it is exact
+    axis = idx == np.array([0, 1, 2, 0, 1]).reshape((5,) + (1,) * idx.ndim)
+    out = np.empty((5, 2) + m.shape[1:])
+    e1 = out[:3, 0]
+    _cross5(u, axis.astype(float), e1)
+    e1 /= _norm(e1)
+    out[3:, 0] = out[:2, 0]
+    _cross5(u, out[:, 0], out[:3, 1])
+    out[3:, 1] = out[:2, 1]
+    return out
 
 
 def orthonormal_pair(m: np.ndarray) -> np.ndarray:
@@ -169,15 +277,9 @@ def orthonormal_pair(m: np.ndarray) -> np.ndarray:
     Built from the axis least aligned with ``m`` so it is well conditioned for every direction
     (vertical image lines included).
     """
-    m = m / _norm3(m)
-    idx = np.argmin(np.abs(m), axis=-1)
-    axis = (idx[..., None] == np.arange(3)).astype(float)     # one-hot: cheaper than a put
-    e1 = _cross3(m, axis)
-    e1 /= _norm3(e1)
-    out = np.empty(m.shape + (2,))
-    out[..., 0] = e1
-    out[..., 1] = _cross3(m, e1)
-    return out
+    m = np.asarray(m, dtype=float)
+    out = _pair_basis(np.ascontiguousarray(m.reshape(-1, 3).T))[:3]
+    return np.ascontiguousarray(out.transpose(2, 0, 1)).reshape(m.shape + (2,))
 
 
 @dataclass
@@ -241,19 +343,124 @@ def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
     intrinsics : (fx, fy, cx, cy)
         Pixels.
     """
-    m, cov = interpretation_normals(tracks, intrinsics)
-    ok = np.isfinite(m[..., 0])
-    pair_ok = ok[:, :-1] & ok[:, 1:]
-    ti, ki = np.nonzero(pair_ok)
-    m0, m1 = m[ti, ki], m[ti, ki + 1]
-    mbar = 0.5 * (m0 + m1)
-    E = orthonormal_pair(mbar)
-    Et = np.swapaxes(E, -1, -2)
-    M = -Et @ skew(mbar)
-    b = np.einsum('pjk,pk->pj', Et, m1 - m0)
-    cov0, cov1 = cov[ti, ki], cov[ti, ki + 1]
-    rows = whiten_tracks(tracks.shape[0], tracks.shape[1] - 1, ti, ki, E, cov0, cov1, M, b)
-    return LineFlows(tracks.shape[0], ti, m0, m1, cov0, cov1, E, M, b, ki, rows)
+    m, cov = _normals(np.asarray(tracks, dtype=float), intrinsics)   # (3, K, N), (3, 3, K, N)
+    n_slots, n_tracks = m.shape[1] - 1, m.shape[2]
+    ok = np.isfinite(m[0])
+    pair_ok = ok[:-1] & ok[1:]                                   # (S, N)
+    ti, ki = np.nonzero(pair_ok.T)                               # pairs in track, slot order
+    flat = None if ti.size == pair_ok.size else ti * n_slots + ki
+    # every quantity is computed for every (slot, track), pair or not (NaN), and only the
+    # outputs are picked by pair: no gathers or scatters in between
+    m0, m1 = m[:, :-1], m[:, 1:]
+    cov0, cov1 = cov[:, :, :-1], cov[:, :, 1:]
+    mbar = np.empty((5,) + pair_ok.shape)                        # rolled, for _cross5
+    np.add(m0, m1, out=mbar[:3])
+    mbar[:3] *= 0.5                                              # 0.5 (m0 + m1)
+    mbar[3:] = mbar[:2]
+    E = _pair_basis(mbar[:3])                                    # (5, 2, S, N)
+    # z: per slot and row j, [M_j, -b_j, B_j (2), A_j (2)] (see _whiten); zc: columns first
+    z = np.empty((n_slots, 2, 8, n_tracks))
+    zc = z.transpose(2, 1, 0, 3)                                 # (8, 2, S, N)
+    _cross5(mbar[:, None], E, zc[:3])                           # M = -E^T [m_bar]x: m_bar x e_j
+    t = E[:3] * (m1 - m0)[:, None]                               # b = E^T (m1 - m0)
+    b = t[0] + t[1]
+    b += t[2]
+    np.negative(b, out=zc[3])
+    _blocks(E[:3], cov0, cov1, zc)
+    # the outputs by pair: one transposing copy per source array (the slow part), then copies
+    # of contiguous chunks or gathers
+    rows = _by_pair(z[:, :, :4].transpose(1, 2, 0, 3), flat)     # [M, -b] before _whiten
+    track_rows = _whiten(z, pair_ok)
+    m, cov = _per_track(m), _per_track(cov)                      # (N, K, 3), (N, K, 3, 3)
+    if flat is None:
+        m0, m1 = (np.ascontiguousarray(a).reshape(-1, 3) for a in (m[:, :-1], m[:, 1:]))
+        cov0, cov1 = (np.ascontiguousarray(a).reshape(-1, 3, 3)
+                      for a in (cov[:, :-1], cov[:, 1:]))
+    else:
+        frame = flat + ti                                        # track * K + slot
+        m, cov = m.reshape(-1, 3), cov.reshape(-1, 3, 3)
+        m0, m1 = np.take(m, frame, axis=0), np.take(m, frame + 1, axis=0)
+        cov0, cov1 = np.take(cov, frame, axis=0), np.take(cov, frame + 1, axis=0)
+    return LineFlows(n_tracks, ti, m0, m1, cov0, cov1, _by_pair(E[:3], flat),
+                     np.ascontiguousarray(rows[..., :3]), -rows[..., 3], ki, track_rows)
+
+
+def _by_pair(a: np.ndarray, flat: Optional[np.ndarray]) -> np.ndarray:
+    """Values ``(P, ...)`` of every pair from a slot-major array ``(..., S, N)``.
+
+    ``flat``: the pairs' indices ``track * S + slot``, or None for all (track, slot) in order.
+    """
+    out = _per_track(a)
+    out = out.reshape((-1,) + out.shape[2:])
+    return out if flat is None else np.take(out, flat, axis=0)      # take: faster than []
+
+
+def _blocks(E: np.ndarray, cov0: np.ndarray, cov1: np.ndarray, zc: np.ndarray) -> None:
+    """Write the residual covariance blocks of every pair into ``zc[4:8] (4, 2, S, N)``.
+
+    ``zc[6:8, j]``: row j of the diagonal block ``A = E^T (S_m0 + S_m1) E`` (2x2) of the pair's
+    residual ``r = M c - b``; ``zc[4:6, j]``: of the block ``B = Cov(r_s, r_s+1) =
+    -E_s^T S_m(s+1) E_s+1`` with the track's next pair (they share a frame), zero in the last
+    slot. ``E (3, 2, S, N)``, ``cov0``/``cov1 (3, 3, S, N)``: the normal covariances of the
+    pairs' two frames.
+    """
+    # two products (C E, then E^T (C E)): fewer multiplications than a three-operand einsum
+    ce = np.einsum('ab...,bk...->ak...', cov0 + cov1, E)
+    np.einsum('aj...,ak...->kj...', E, ce, out=zc[6:8])
+    ce = np.einsum('ab...,bk...->ak...', cov1[:, :, :-1], E[:, :, 1:])
+    off = zc[4:6, :, :-1]
+    np.einsum('aj...,ak...->kj...', E[:, :, :-1], ce, out=off)
+    np.negative(off, out=off)
+    zc[4:6, :, -1:] = 0.0
+
+
+#: ``z`` of a missing pair (see :func:`_whiten`): zero rows, ``A = I``, ``B = 0``
+_MISSING = np.array([[0.0] * 6 + [1.0, 0.0], [0.0] * 7 + [1.0]])[:, :, None]
+
+
+def _whiten(z: np.ndarray, pair_ok: np.ndarray) -> np.ndarray:
+    """Whitened rows ``(N, 2 S, 4)`` of every track from the pair data ``z (S, 2, 8, N)``.
+
+    ``z[s, j, :, i]`` is ``[M_j, -b_j, B_j0, B_j1, A_j0, A_j1]`` of track i's slot s (see
+    :func:`_blocks`); ``pair_ok (S, N)`` says which slots hold a pair (the others may hold
+    anything, NaN included). ``z`` is overwritten.
+
+    A track's residual covariance is block-tridiagonal with 2x2 blocks ``A_s`` (diagonal) and
+    ``B_s`` (slots s, s+1). Its Cholesky factor follows the block recursion over slots (Schur
+    complements ``D``)::
+
+        D_0 = A_0,  L_s = chol(D_s),  V_s = L_s^-1 B_s,  D_s+1 = A_s+1 - V_s^T V_s
+        y_s = L_s^-1 (r_s - V_s-1^T y_s-1)
+
+    and ``y = L^-1 r`` are the whitened rows: closed-form 2x2 arithmetic on ``(N,)`` arrays
+    for each slot, where the dense ``(N, 2S, 2S)`` matrix and its LAPACK Cholesky and solve
+    cost several times more. A missing slot gets ``A = I``, ``B = 0`` and zero rows (as does
+    the ``B`` into it): its whitened rows are zero and it breaks the chain.
+    """
+    n_slots, n_tracks = z.shape[0], z.shape[3]
+    if not pair_ok.all():
+        miss = ~pair_ok[:, None, None, :]
+        np.copyto(z, _MISSING, where=miss)
+        np.copyto(z[:-1, :, 4:6], 0.0, where=miss[1:])
+    with np.errstate(invalid='ignore', divide='ignore'):
+        for s in range(n_slots):
+            x0, x1 = z[s]                                        # rows [r, B, D] of the slot
+            # L^-1 on all eight columns in place: row 0 / l11 turns D's row 0 into
+            # (l11, l21), and row 1 - l21 row 0 turns D's row 1 into (0, l22^2)
+            l11 = np.sqrt(x0[6])
+            x0 /= l11
+            x1 -= x0[7] * x0
+            x1 /= np.sqrt(x1[7])
+            if s + 1 < n_slots:
+                # V^T [y, V] (V = L^-1 B): the next rows' correction and V^T V for the next
+                # Schur complement
+                corr = x0[4:6, None] * x0[:6] + x1[4:6, None] * x1[:6]   # (2, 6, N)
+                nxt = z[s + 1]
+                nxt[:, :4] -= corr[:, :4]
+                nxt[:, 6:] -= corr[:, 4:]
+    out = np.empty((n_tracks, n_slots, 2, 4))
+    np.copyto(out.transpose(1, 2, 3, 0), z[:, :, :4])
+    return out.reshape(n_tracks, 2 * n_slots, 4)
 
 
 def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E: np.ndarray,
@@ -263,7 +470,8 @@ def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E
 
     Returns the whitened rows ``[M, -b]`` of every track ``(N, 2 (K-1), 4)`` by frame-pair
     slot, zero where a pair is missing (its slot is uncorrelated with the others, so its
-    whitened rows stay zero).
+    whitened rows stay zero). The inputs are those of :class:`LineFlows` (``ti``, ``ki``:
+    ``pair_track``, ``pair_slot``); :func:`line_flows` does the same on its own arrays.
 
     Consecutive frame pairs of a track share a frame, so their residuals are correlated
     (``Cov(r_t, r_t+1) = -E_t^T S_m(t+1) E_t+1``): the covariance of a track's ``2 (K-1)``
@@ -273,29 +481,17 @@ def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E
     block-diagonal approximation put 0.4% of inliers above the 99.9% bound at K = 5). The
     covariance is taken at ``c = 0``: the exact one differs by ``(I +- [c]x/2)``, a few percent.
     """
-    d = 2 * n_slots
-    slot = ki
-    full = np.zeros((n_tracks, d, d))
-    full[:, np.arange(d), np.arange(d)] = 1.0                         # missing pairs: unit
-    cov = full.reshape(n_tracks, n_slots, 2, n_slots, 2)             # a view: 2x2 blocks
-    Et = np.swapaxes(E, 1, 2)
-    cov[ti, slot, :, slot] = Et @ (cov0 + cov1) @ E
-    # pairs (t, t+1) and (t+1, t+2) of the same track share frame t+1
-    lookup = np.full((n_tracks, n_slots + 1), -1)
-    lookup[ti, slot] = np.arange(ti.size)
-    nxt = lookup[ti, slot + 1]
-    has = nxt >= 0
-    p, q = np.flatnonzero(has), nxt[has]
-    off = -(Et[p] @ cov1[p] @ E[q])
-    cov[ti[p], slot[p], :, slot[q]] = off
-    cov[ti[p], slot[q], :, slot[p]] = np.swapaxes(off, 1, 2)
-    stacked = np.zeros((n_tracks, n_slots, 2, 4))
-    stacked[ti, slot, :, :3] = M
-    stacked[ti, slot, :, 3] = b
-    L = np.linalg.cholesky(full)
-    rows = np.linalg.solve(L, stacked.reshape(n_tracks, d, 4))
-    rows[..., 3] *= -1.0
-    return rows
+    def grid(a: np.ndarray) -> np.ndarray:                       # (P, ...) -> (..., S, N)
+        out = np.zeros(a.shape[1:] + (n_slots, n_tracks))
+        out[..., ki, ti] = np.moveaxis(a, 0, -1)
+        return out
+
+    z = np.empty((n_slots, 2, 8, n_tracks))
+    zc = z.transpose(2, 1, 0, 3)
+    zc[:3] = grid(M).transpose(1, 0, 2, 3)
+    zc[3] = -grid(b)
+    _blocks(grid(E), grid(cov0), grid(cov1), zc)
+    return _whiten(z, grid(np.ones(ti.size)) > 0)
 
 
 def first_midpoints(tracks: np.ndarray) -> np.ndarray:
