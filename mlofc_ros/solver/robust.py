@@ -76,14 +76,16 @@ def _sample_pairs(rng: np.random.Generator, pool: np.ndarray, mid: np.ndarray,
 def _column_quantile(x: np.ndarray, q: float) -> np.ndarray:
     """``np.quantile(x, q, axis=0)`` (method 'linear') of ``x (R, H)`` without nan, ``(H,)``.
 
-    The same order statistics and interpolation as numpy, from one partition at the two ranks
+    The same order statistics and interpolation as numpy, from one partition at the lower rank
     (numpy's quantile moves axes and partitions at extra ranks: 5x slower here).
     """
     v = (x.shape[0] - 1) * q
     lo = int(np.floor(v))
-    hi = min(lo + 1, x.shape[0] - 1)
-    part = np.partition(x, sorted({lo, hi}), axis=0)
-    a, b = part[lo], part[hi]
+    part = np.partition(x, lo, axis=0)
+    a = part[lo]
+    # the next order statistic is the least value above rank lo: a partition at both ranks
+    # costs 2.5x the one at lo (measured), this reduction a tenth of it
+    b = part[lo + 1:].min(axis=0) if lo + 1 < x.shape[0] else a
     t = v - lo
     diff = b - a
     return b - diff * (1.0 - t) if t >= 0.5 else a + diff * t
