@@ -19,6 +19,7 @@ import pytest
 from scenes import random_scene
 
 from mlofc_ros.solver.focal import unknown_f_rows_from_normals
+from mlofc_ros.solver.gpca import algebraic_normals
 from mlofc_ros.solver.lines import (cayley_to_rotvec, line_flows, orthonormal_pair,
                                     rotation_matrix, rotvec_to_cayley, skew)
 from mlofc_ros.solver.veronese import (embed, exponents, gradient, relation_space,
@@ -103,21 +104,46 @@ def test_unknown_f_row_is_orthogonal_to_u():
     assert np.max(np.abs(rows @ u)) < 1e-3 * np.max(np.abs(rows[:, 5]))
 
 
-@pytest.mark.parametrize('n_vars,degree', [(4, 1), (4, 2), (4, 3), (4, 4), (6, 3)])
+@pytest.mark.parametrize('n_vars,degree',
+                         [(4, 1), (4, 2), (4, 3), (4, 4), (4, 5), (6, 2), (6, 3), (6, 5)])
 def test_veronese_embedding_and_gradient(n_vars, degree):
     exps = exponents(n_vars, degree)
     assert exps.shape == (comb(degree + n_vars - 1, n_vars - 1), n_vars)
     y = RNG.normal(size=(7, n_vars))
     v = embed(y, degree)
     np.testing.assert_allclose(v, np.prod(y[:, None, :] ** exps[None], axis=2), rtol=1e-12)
+    # built from a given lower degree: the same products
+    lower = embed(y, degree - 1)
+    assert np.array_equal(embed(y, degree, lower), v)
     coeffs = RNG.normal(size=exps.shape[0])
     grad = gradient(y, coeffs, degree)
+    assert np.array_equal(gradient(y, coeffs, degree, lower), grad)
     h = 1e-6
     for j in range(n_vars):
         d = np.zeros(n_vars)
         d[j] = h
         fd = (embed(y + d, degree) @ coeffs - embed(y - d, degree) @ coeffs) / (2 * h)
         np.testing.assert_allclose(grad[:, j], fd, rtol=1e-6, atol=1e-8)
+
+
+def test_veronese_degree_zero():
+    y = RNG.normal(size=(5, 4))
+    assert np.array_equal(embed(y, 0), np.ones((5, 1)))
+    assert np.array_equal(gradient(y, np.ones(1), 0), np.zeros((5, 4)))
+
+
+@pytest.mark.parametrize('n_vars,n', [(4, 1), (4, 3), (4, 5), (6, 3)])
+def test_gpca_recovers_exact_hyperplanes(n_vars, n):
+    normals = np.concatenate([RNG.normal(size=(n, n_vars - 1)), np.ones((n, 1))], axis=1)
+    rows = []
+    for u in normals:
+        # rows on the hyperplane y . u = 0: free head, last entry solved for
+        head = RNG.normal(size=(40, n_vars - 1))
+        rows.append(np.concatenate([head, -(head @ u[:-1])[:, None]], axis=1))
+    got = algebraic_normals(np.concatenate(rows), n)
+    # one recovered normal per true one, in any order
+    err = np.max(np.abs(got[:, None, :] - normals[None]), axis=2)
+    assert np.all(np.min(err, axis=0) < 1e-6)
 
 
 @pytest.mark.parametrize('n', [2, 3, 4])
