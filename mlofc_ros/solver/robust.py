@@ -46,10 +46,10 @@ OUTLIER_P = 0.9999
 def noise_sigma(costs: np.ndarray, labels: np.ndarray, dof: np.ndarray,
                 floor: float = 1e-6) -> float:
     """Robust endpoint noise (px) from the costs of the labelled tracks (median of chi-square)."""
-    ok = labels >= 0
-    if not np.any(ok):
+    rows = np.flatnonzero(labels >= 0)
+    if not rows.size:
         return 1.0
-    best = costs[np.flatnonzero(ok), labels[ok]] / chi2_quantile(0.5, dof[ok])
+    best = costs[rows, labels[rows]] / chi2_quantile(0.5, dof[rows])
     return float(max(np.sqrt(median(best)), floor))
 
 
