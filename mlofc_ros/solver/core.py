@@ -139,34 +139,46 @@ def _finish(flows: LineFlows, labels: np.ndarray, c: np.ndarray, costs: np.ndarr
     sigma = info.get('sigma_px') or noise_sigma(costs, labels, dof)
     _, inf_mat = fit_bodies(flows, labels, n)
     counts = np.bincount(labels[labels >= 0], minlength=n)
-    jac = cayley_jacobian(c)
-    cov = np.full((n, 3, 3), np.inf)
-    fitted = np.flatnonzero(counts >= 2)
-    try:
-        # all bodies in one stacked call (the same LAPACK inverse and 3x3 products per body)
-        cov_c = sigma ** 2 * np.linalg.inv(inf_mat[fitted])
-        cov[fitted] = jac[fitted] @ cov_c @ np.swapaxes(jac[fitted], 1, 2)
-    except np.linalg.LinAlgError:
-        for i in fitted:                                  # n bodies, not a per-line loop
-            try:
-                cov_c = sigma ** 2 * np.linalg.inv(inf_mat[i])
-            except np.linalg.LinAlgError:
-                continue
-            cov[i] = jac[i] @ cov_c @ jac[i].T
+    cov = _covariances(inf_mat, cayley_jacobian(c), sigma ** 2, (counts >= 2).nonzero()[0])
     # outliers: the residual under their best body, found in their rows only
     assigned = labels.copy()
-    out = np.flatnonzero(labels < 0)
+    out = (labels < 0).nonzero()[0]
     if out.size:
         assigned[out] = _argmin_nan_to_num(costs[out]) if n else 0
     # rms of the tracks with a frame pair; nan for the others (no 0 / 0)
-    rms = np.full(costs.shape[0], np.nan)
-    has = np.flatnonzero(dof > 0)
-    rms[has] = np.sqrt(costs[has, assigned[has]] / dof[has])
+    rms = np.divide(costs[np.arange(costs.shape[0]), assigned], dof,
+                    out=np.full(costs.shape[0], np.nan), where=dof > 0)
+    np.sqrt(rms, out=rms)
     info = dict(info, sigma_px=float(sigma))
     return SegmentationResult(labels=labels.astype(np.int64),
                               angular_velocities=cayley_to_rotvec(c), angular_covariances=cov,
                               focal_length=float(focal),
                               residuals=rms, costs=costs, method=method, info=info)
+
+
+def _covariances(info: np.ndarray, jac: np.ndarray, sigma2: float, fitted: np.ndarray
+                 ) -> np.ndarray:
+    """Covariances ``(n, 3, 3)`` of the bodies' rotation vectors; ``inf`` for the unfitted.
+
+    ``info (n, 3, 3)``: information matrices of the Cayley vectors for 1 px noise; ``jac``:
+    Jacobians of the rotation vectors; ``sigma2``: noise variance (px^2); ``fitted``: the
+    bodies to compute (enough tracks).
+    """
+    n = info.shape[0]
+    cov = np.full((n, 3, 3), np.inf)
+    every = slice(None) if fitted.size == n else fitted    # no copies in the usual case
+    try:
+        # all bodies in one stacked call (the same LAPACK inverse and 3x3 products per body)
+        j = jac[every]
+        cov[every] = j @ (sigma2 * np.linalg.inv(info[every])) @ j.transpose(0, 2, 1)
+    except np.linalg.LinAlgError:
+        for i in fitted:                                  # n bodies, not a per-line loop
+            try:
+                cov_c = sigma2 * np.linalg.inv(info[i])
+            except np.linalg.LinAlgError:
+                continue
+            cov[i] = jac[i] @ cov_c @ jac[i].T
+    return cov
 
 
 def _argmin_nan_to_num(costs: np.ndarray) -> np.ndarray:

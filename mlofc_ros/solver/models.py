@@ -187,7 +187,7 @@ def _empty_tracks(flows: LineFlows) -> np.ndarray:
     """Return the tracks without a frame pair (cached on ``flows``: every cost needs them)."""
     out = flows.cache.get('empty')
     if out is None:
-        out = flows.cache['empty'] = np.flatnonzero(flows.pairs_per_track() == 0)
+        out = flows.cache['empty'] = (flows.pairs_per_track() == 0).nonzero()[0]
     return out
 
 

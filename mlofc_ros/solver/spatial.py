@@ -99,26 +99,35 @@ def _neighbours(pts: np.ndarray, k: int, window: int) -> np.ndarray:
     lo = pts.min(axis=0)
     q = (pts - lo) * (32767.0 / max(float(np.ptp(pts, axis=0).max()), 1e-9))
     offs = np.r_[-window:0, 1:window + 1]
-    parts = []
-    for shift in (0.0, 32767.0 / 3.0):          # a second, shifted curve covers the seams
-        order = np.argsort(_morton(q + shift), kind='stable')
+    # int32 indices and in-place arithmetic: at N ~ 1000 the (N, 4 window) temporaries, not
+    # the arithmetic, cost the time
+    cs = np.empty((n, 2 * offs.size), dtype=np.int32)
+    for i, shift in enumerate((0.0, 32767.0 / 3.0)):   # a second, shifted curve: the seams
+        order = np.argsort(_morton(q + shift), kind='stable').astype(np.int32)
         rank = np.empty(n, dtype=np.int64)
         rank[order] = np.arange(n)
-        parts.append(order[np.clip(rank[:, None] + offs, 0, n - 1)])
+        pos = rank[:, None] + offs
+        np.clip(pos, 0, n - 1, out=pos)
+        np.take(order, pos, out=cs[:, i * offs.size:(i + 1) * offs.size])
     # the candidates sorted per track, so that one found twice (on both curves, or clipped at
     # an end of a curve) counts once. Sorting the indices themselves (not argsort and gathers)
     # and measuring the distances after gives the same arrays several times faster: every
     # repeat of a candidate has the same distance
-    cs = np.sort(np.concatenate(parts, axis=1), axis=1)
-    # squared distances as dx^2 + dy^2, the same sums as np.sum over the last axis of the
+    cs.sort(axis=1)
+    # squared distances dx^2 + dy^2, the same sums as np.sum over the last axis of the
     # (N, C, 2) differences, without that length-2 reduction (20x slower)
-    dx = pts[cs, 0] - pts[:, 0, None]
-    dy = pts[cs, 1] - pts[:, 1, None]
-    ds = dx * dx + dy * dy
-    ds[cs == np.arange(n)[:, None]] = np.inf
-    ds[:, 1:][cs[:, 1:] == cs[:, :-1]] = np.inf
+    x, y = pts[:, 0].copy(), pts[:, 1].copy()
+    ds = x[cs]
+    ds -= x[:, None]
+    ds *= ds
+    dy = y[cs]
+    dy -= y[:, None]
+    dy *= dy
+    ds += dy
+    np.copyto(ds, np.inf, where=cs == np.arange(n)[:, None])
+    np.copyto(ds[:, 1:], np.inf, where=cs[:, 1:] == cs[:, :-1])
     near = np.argpartition(ds, k - 1, axis=1)[:, :k]
-    return np.take_along_axis(cs, near, axis=1)
+    return np.take_along_axis(cs, near, axis=1).astype(np.int64)
 
 
 def label_coherence(labels: np.ndarray, neighbours: np.ndarray) -> float:
@@ -175,7 +184,12 @@ def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
     if n < 2 or neighbours.shape[1] == 0 or n_keep < 2:
         return lab, 0.0
     data = np.where(np.isfinite(costs), costs, np.inf)
-    scale = median(data.min(axis=1)[keep])
+    # the best cost of every track as the minimum over the few bodies taken column by column
+    # (the same values as data.min(axis=1): no nan here; faster along a short axis)
+    best = data[:, 0]
+    for b in range(1, n):
+        best = np.minimum(best, data[:, b])
+    scale = median(best[keep])
     # every track's neighbours counted by label in one bincount: bin 0 = unlabelled (or a pad),
     # bin 1 + b = label b. The same integers as comparing every neighbour with every body, in
     # a few calls instead of (N, k, n) temporaries reduced over a middle axis
@@ -193,7 +207,7 @@ def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
     cnt = tally(np.maximum(lab, -1))
     # label_coherence's counts: labelled neighbours of the labelled tracks, and those among
     # them with the track's own label
-    rows = np.flatnonzero(keep)
+    rows = keep.nonzero()[0]
     pairs = k * n_keep - int(cnt[offsets[rows]].sum())
     if pairs == 0:
         return lab, 0.0
@@ -201,7 +215,7 @@ def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
     coupling = weight * _coherence(agree, pairs, np.bincount(codes[rows])) * scale
     if not coupling > 0.0:
         return lab, 0.0
-    drop = np.flatnonzero(~keep)
+    drop = (~keep).nonzero()[0]
     for sweep in range(sweeps):
         if sweep:
             cnt = tally(lab)
@@ -209,7 +223,7 @@ def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
         # labelled neighbours with another label: (present - votes) of every body
         new = (data + coupling * ((k - cnt[:, :1]) - cnt[:, 1:n + 1])).argmin(axis=1)
         new[drop] = -1
-        if np.array_equal(new, lab):
+        if (new == lab).all():
             break
         lab = new
     return lab, coupling
