@@ -12,6 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """``segment_lines``: the public entry point of the solver."""
+import math
 from math import comb
 from typing import Optional, Sequence, Tuple
 
@@ -45,7 +46,7 @@ KMEANS_RESTARTS = 10
 
 def _check_tracks(tracks) -> np.ndarray:
     try:
-        arr = np.asarray(tracks, dtype=np.float64)
+        arr = np.array(tracks, dtype=np.float64, order='C')           # a copy: NaNs go in
     except (TypeError, ValueError) as exc:
         raise ValueError(f'tracks must be a numeric array of shape (N, K, 4): {exc}') from None
     if arr.ndim != 3 or arr.shape[2] != 4:
@@ -53,13 +54,12 @@ def _check_tracks(tracks) -> np.ndarray:
                          f'frame), got {arr.shape}')
     if arr.shape[1] < 2:
         raise ValueError(f'tracks need K >= 2 frames, got K = {arr.shape[1]}')
-    if np.any(np.isinf(arr)):
+    if np.isinf(arr).any():
         raise ValueError('tracks contain infinite coordinates (use NaN for missing frames)')
-    # a frame counts only if all four coordinates are there and the endpoints differ
+    # a frame counts only if all four coordinates are there and the endpoints differ: with no
+    # infinities, a nan coordinate makes the length nan, so one comparison tests both
     length = np.hypot(arr[..., 2] - arr[..., 0], arr[..., 3] - arr[..., 1])
-    bad = ~np.isfinite(arr).all(axis=2) | (length <= 1e-9)
-    arr = arr.copy()
-    arr[bad] = np.nan
+    arr[~(length > 1e-9)] = np.nan
     return arr
 
 
@@ -69,12 +69,14 @@ def _check_intrinsics(intrinsics, image_size
         vals = np.asarray(intrinsics, dtype=float).ravel()
         if vals.size != 4:
             raise ValueError(f'intrinsics must be (fx, fy, cx, cy), got {vals.size} values')
-        if not np.all(np.isfinite(vals)):
+        # four numbers, checked as Python floats: numpy calls on them cost more than the checks
+        fx, fy, cx, cy = vals.tolist()
+        if not all(map(math.isfinite, (fx, fy, cx, cy))):
             raise ValueError(f'intrinsics must be finite, got {tuple(vals)}')
-        if vals[0] <= 0 or vals[1] <= 0:
+        if fx <= 0 or fy <= 0:
             raise ValueError(f'focal lengths must be > 0, got fx={vals[0]}, fy={vals[1]}')
-        size = (2.0 * vals[2], 2.0 * vals[3]) if image_size is None else image_size
-        return tuple(float(v) for v in vals), _check_size(size)
+        size = (2.0 * cx, 2.0 * cy) if image_size is None else image_size
+        return (fx, fy, cx, cy), _check_size(size)
     if image_size is None:
         raise ValueError('image_size=(w, h) is needed when intrinsics are unknown (None)')
     return None, _check_size(image_size)
@@ -82,9 +84,10 @@ def _check_intrinsics(intrinsics, image_size
 
 def _check_size(image_size) -> Tuple[float, float]:
     vals = np.asarray(image_size, dtype=float).ravel()
-    if vals.size != 2 or not np.all(np.isfinite(vals)) or np.any(vals <= 0):
+    w, h = vals.tolist() if vals.size == 2 else (math.nan, math.nan)
+    if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
         raise ValueError(f'image_size must be (w, h) > 0, got {image_size!r}')
-    return float(vals[0]), float(vals[1])
+    return w, h
 
 
 def min_tracks_needed(n_bodies: int, n_frames: int, method: str, focal_known: bool) -> int:
@@ -136,24 +139,59 @@ def _finish(flows: LineFlows, labels: np.ndarray, c: np.ndarray, costs: np.ndarr
     sigma = info.get('sigma_px') or noise_sigma(costs, labels, dof)
     _, inf_mat = fit_bodies(flows, labels, n)
     counts = np.bincount(labels[labels >= 0], minlength=n)
-    jac = cayley_jacobian(c)
-    cov = np.full((n, 3, 3), np.inf)
-    for i in np.flatnonzero(counts >= 2):                 # n bodies, not a per-line loop
-        try:
-            cov_c = sigma ** 2 * np.linalg.inv(inf_mat[i])
-        except np.linalg.LinAlgError:
-            continue
-        cov[i] = jac[i] @ cov_c @ jac[i].T
-    assigned = np.where(labels >= 0, labels, np.argmin(np.nan_to_num(costs, nan=np.inf), axis=1)
-                        if n else 0)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        rms = np.sqrt(costs[np.arange(costs.shape[0]), assigned] / dof)
-    rms[dof == 0] = np.nan
+    cov = _covariances(inf_mat, cayley_jacobian(c), sigma ** 2, (counts >= 2).nonzero()[0])
+    # outliers: the residual under their best body, found in their rows only
+    assigned = labels.copy()
+    out = (labels < 0).nonzero()[0]
+    if out.size:
+        assigned[out] = _argmin_nan_to_num(costs[out]) if n else 0
+    # rms of the tracks with a frame pair; nan for the others (no 0 / 0)
+    rms = np.divide(costs[np.arange(costs.shape[0]), assigned], dof,
+                    out=np.full(costs.shape[0], np.nan), where=dof > 0)
+    np.sqrt(rms, out=rms)
     info = dict(info, sigma_px=float(sigma))
     return SegmentationResult(labels=labels.astype(np.int64),
                               angular_velocities=cayley_to_rotvec(c), angular_covariances=cov,
                               focal_length=float(focal),
                               residuals=rms, costs=costs, method=method, info=info)
+
+
+def _covariances(info: np.ndarray, jac: np.ndarray, sigma2: float, fitted: np.ndarray
+                 ) -> np.ndarray:
+    """Covariances ``(n, 3, 3)`` of the bodies' rotation vectors; ``inf`` for the unfitted.
+
+    ``info (n, 3, 3)``: information matrices of the Cayley vectors for 1 px noise; ``jac``:
+    Jacobians of the rotation vectors; ``sigma2``: noise variance (px^2); ``fitted``: the
+    bodies to compute (enough tracks).
+    """
+    n = info.shape[0]
+    cov = np.full((n, 3, 3), np.inf)
+    every = slice(None) if fitted.size == n else fitted    # no copies in the usual case
+    try:
+        # all bodies in one stacked call (the same LAPACK inverse and 3x3 products per body)
+        j = jac[every]
+        cov[every] = j @ (sigma2 * np.linalg.inv(info[every])) @ j.transpose(0, 2, 1)
+    except np.linalg.LinAlgError:
+        for i in fitted:                                  # n bodies, not a per-line loop
+            try:
+                cov_c = sigma2 * np.linalg.inv(info[i])
+            except np.linalg.LinAlgError:
+                continue
+            cov[i] = jac[i] @ cov_c @ jac[i].T
+    return cov
+
+
+def _argmin_nan_to_num(costs: np.ndarray) -> np.ndarray:
+    """``np.argmin(np.nan_to_num(costs, nan=np.inf), axis=1)`` of ``costs (M, n)``, ``(M,)``.
+
+    The same mapping (nan to inf, +-inf to +-the largest float: inf ranks after it) in a few
+    ufunc calls instead of nan_to_num's generic machinery.
+    """
+    clipped = np.minimum(np.maximum(costs, -_BIG), _BIG)
+    return np.where(np.isnan(costs), np.inf, clipped).argmin(axis=1)
+
+
+_BIG = float(np.finfo(np.float64).max)
 
 
 def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] = None,
@@ -215,7 +253,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         from .model_selection import select_bodies
         return select_bodies(arr, intr, size, method, seed=seed)
     ok = np.isfinite(arr[..., 0])
-    usable = int(np.sum(np.any(ok[:, :-1] & ok[:, 1:], axis=1)))
+    usable = np.count_nonzero((ok[:, :-1] & ok[:, 1:]).any(axis=1))
     need = min_tracks_needed(n, arr.shape[1], method, intr is not None)
     if usable < need:
         raise ValueError(f'{usable} usable tracks (present in two consecutive frames), but '
@@ -228,7 +266,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         # ids of bodies this model does not have are unknown
         init_labels = np.where((init_labels >= 0) & (init_labels < n), init_labels, -1)
         init_labels = init_labels.astype(np.int64)
-    rng = np.random.default_rng(seed)
+    rng = _LazyGenerator(seed)
     if method == 'general':
         rot = segment_lines(arr, n, intr, size, 'robust', seed=seed, init_labels=init_labels)
         return _general(arr, rot, rng, init_labels, _check_motions(init_motions, n))
@@ -265,6 +303,25 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     labels, c, costs, sub = _solve_known_f(flows, arr, n, method, rng, init_labels)
     info.update(sub, principal_point=centre, aspect=1.0, image_size=size)
     return _finish(flows, labels, c, costs, f, method, info)
+
+
+class _LazyGenerator:
+    """``np.random.default_rng(seed)``, made on first use (the same draws).
+
+    A warm-started solve, the common case in a stream, draws nothing, and seeding a generator
+    costs ~20 us, about 1% of such a solve.
+    """
+
+    __slots__ = ('_seed', '_rng')
+
+    def __init__(self, seed):
+        self._seed = seed
+        self._rng = None
+
+    def __getattr__(self, name: str):
+        if self._rng is None:
+            self._rng = np.random.default_rng(self._seed)
+        return getattr(self._rng, name)
 
 
 def _check_motions(init_motions, n: int) -> Optional[Tuple[np.ndarray, np.ndarray]]:

@@ -27,11 +27,11 @@ def assign(costs: np.ndarray, threshold: Optional[np.ndarray] = None) -> np.ndar
     if costs.shape[1] == 0:
         return np.full(costs.shape[0], -1, dtype=np.int64)
     ok = np.isfinite(costs).all(axis=1)
-    labels = np.argmin(np.where(ok[:, None], costs, 0.0), axis=1)
+    labels = np.where(ok[:, None], costs, 0.0).argmin(axis=1)
+    out = ~ok
     if threshold is not None:
-        best = costs[np.arange(costs.shape[0]), labels]
-        labels[best > threshold] = -1
-    labels[~ok] = -1
+        out |= costs[np.arange(costs.shape[0]), labels] > threshold
+    labels[out] = -1
     return labels
 
 

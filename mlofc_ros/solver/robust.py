@@ -46,10 +46,10 @@ OUTLIER_P = 0.9999
 def noise_sigma(costs: np.ndarray, labels: np.ndarray, dof: np.ndarray,
                 floor: float = 1e-6) -> float:
     """Robust endpoint noise (px) from the costs of the labelled tracks (median of chi-square)."""
-    ok = labels >= 0
-    if not np.any(ok):
+    rows = (labels >= 0).nonzero()[0]
+    if not rows.size:
         return 1.0
-    best = costs[np.flatnonzero(ok), labels[ok]] / chi2_quantile(0.5, dof[ok])
+    best = costs[rows, labels[rows]] / chi2_quantile(0.5, dof[rows])
     return float(max(np.sqrt(median(best)), floor))
 
 
@@ -237,7 +237,7 @@ def _final_pass(flows: LineFlows, tracks: np.ndarray, lab: np.ndarray, c: np.nda
         # outliers are decided by the costs alone; the neighbours only choose among bodies
         new, coupling = smooth_labels(costs, assign(costs, cap), neighbours)
         c_new, _ = fit_bodies(flows, new, n)
-        same = np.array_equal(new, lab)
+        same = bool((new == lab).all())
         if not (same and np.array_equal(c_new, c)):
             # (a converged K-subspaces start refits to the very same c: costs are unchanged)
             costs = track_costs(flows, c_new, weighted=True)

@@ -20,7 +20,7 @@ label) to the per-track costs and minimises it by iterated conditional modes. Th
 estimated from the labelling itself: when labels are spatially mixed (the paper's synthetic
 scenes of intermixed random lines) it is zero and nothing changes.
 """
-from typing import Tuple
+from typing import Optional, Tuple
 
 import numpy as np
 
@@ -54,43 +54,80 @@ def spatial_neighbours(points: np.ndarray, k: int = NEIGHBOURS, window: int = 16
     true 6 nearest ~0.97 on uniform and clustered points); a smoothness prior needs near
     neighbours, not exactly the nearest ones. Deterministic. ``-1`` pads when N <= k.
     """
+    global _last_neighbours
     pts = np.asarray(points, dtype=np.float64)
+    # the solves of one window at several focal lengths (and the 'general' method after the
+    # rotation-only one) ask for the same neighbours: the last answer is kept (copies out, so
+    # that no caller can change it)
+    key = (k, window, pts.shape, pts.tobytes())
+    last = _last_neighbours
+    if last is not None and last[0] == key:
+        return last[1].copy()
+    out = _neighbours(pts, k, window)
+    _last_neighbours = (key, out.copy())
+    return out
+
+
+#: ``(arguments, neighbours)`` of the last :func:`spatial_neighbours` call.
+_last_neighbours: Optional[Tuple[tuple, np.ndarray]] = None
+
+
+def _neighbours(pts: np.ndarray, k: int, window: int) -> np.ndarray:
+    """:func:`spatial_neighbours` of ``pts (N, 2)``, computed."""
     n = pts.shape[0]
     k = min(k, n - 1)
     if k <= 0:
         return np.full((n, 0), -1, dtype=np.int64)
     if n <= EXACT_MAX:
         d = pts @ (-2.0 * pts.T)
-        sq = np.sum(pts * pts, axis=1)
+        sq = pts * pts
+        sq = sq[:, 0] + sq[:, 1]            # np.sum over the rows' two entries, without it
         d += sq[:, None]
-        d += sq[None, :]
-        np.fill_diagonal(d, np.inf)
+        d += sq
+        flat = d.reshape(-1)                # a view: masks by flat index, one call each
+        flat[::n + 1] = np.inf
         # k argmins, each masking the one found: several times faster than argpartition
         # along rows for k << N
-        out = np.empty((n, k), dtype=np.int64)
-        rows = np.arange(n)
+        out = np.empty((k, n), dtype=np.int64)
+        starts = np.arange(0, n * n, n)
         for j in range(k):
-            out[:, j] = np.argmin(d, axis=1)
-            d[rows, out[:, j]] = np.inf
-        return out
+            col = d.argmin(axis=1)
+            out[j] = col
+            col += starts
+            flat[col] = np.inf
+        return out.T.copy()
     lo = pts.min(axis=0)
     q = (pts - lo) * (32767.0 / max(float(np.ptp(pts, axis=0).max()), 1e-9))
     offs = np.r_[-window:0, 1:window + 1]
-    parts = []
-    for shift in (0.0, 32767.0 / 3.0):          # a second, shifted curve covers the seams
-        order = np.argsort(_morton(q + shift), kind='stable')
+    # int32 indices and in-place arithmetic: at N ~ 1000 the (N, 4 window) temporaries, not
+    # the arithmetic, cost the time
+    cs = np.empty((n, 2 * offs.size), dtype=np.int32)
+    for i, shift in enumerate((0.0, 32767.0 / 3.0)):   # a second, shifted curve: the seams
+        order = np.argsort(_morton(q + shift), kind='stable').astype(np.int32)
         rank = np.empty(n, dtype=np.int64)
         rank[order] = np.arange(n)
-        parts.append(order[np.clip(rank[:, None] + offs, 0, n - 1)])
-    cand = np.concatenate(parts, axis=1)
-    d = np.sum((pts[cand] - pts[:, None, :]) ** 2, axis=2)
-    d[cand == np.arange(n)[:, None]] = np.inf
-    # a candidate found on both curves counts once
-    srt = np.argsort(cand, axis=1, kind='stable')
-    cs, ds = np.take_along_axis(cand, srt, axis=1), np.take_along_axis(d, srt, axis=1)
-    ds[:, 1:][cs[:, 1:] == cs[:, :-1]] = np.inf
+        pos = rank[:, None] + offs
+        np.clip(pos, 0, n - 1, out=pos)
+        np.take(order, pos, out=cs[:, i * offs.size:(i + 1) * offs.size])
+    # the candidates sorted per track, so that one found twice (on both curves, or clipped at
+    # an end of a curve) counts once. Sorting the indices themselves (not argsort and gathers)
+    # and measuring the distances after gives the same arrays several times faster: every
+    # repeat of a candidate has the same distance
+    cs.sort(axis=1)
+    # squared distances dx^2 + dy^2, the same sums as np.sum over the last axis of the
+    # (N, C, 2) differences, without that length-2 reduction (20x slower)
+    x, y = pts[:, 0].copy(), pts[:, 1].copy()
+    ds = x[cs]
+    ds -= x[:, None]
+    ds *= ds
+    dy = y[cs]
+    dy -= y[:, None]
+    dy *= dy
+    ds += dy
+    np.copyto(ds, np.inf, where=cs == np.arange(n)[:, None])
+    np.copyto(ds[:, 1:], np.inf, where=cs[:, 1:] == cs[:, :-1])
     near = np.argpartition(ds, k - 1, axis=1)[:, :k]
-    return np.take_along_axis(cs, near, axis=1)
+    return np.take_along_axis(cs, near, axis=1).astype(np.int64)
 
 
 def label_coherence(labels: np.ndarray, neighbours: np.ndarray) -> float:
@@ -101,8 +138,16 @@ def label_coherence(labels: np.ndarray, neighbours: np.ndarray) -> float:
     pairs = np.count_nonzero(both)
     if pairs == 0:
         return 0.0
-    agree = np.count_nonzero((a == b) & both) / pairs
     counts = np.bincount(labels[labels >= 0])
+    return _coherence(np.count_nonzero((a == b) & both), pairs, counts)
+
+
+def _coherence(agree: int, pairs: int, counts: np.ndarray) -> float:
+    """:func:`label_coherence` from the numbers of agreeing and of labelled neighbour pairs.
+
+    ``counts``: tracks per label (trailing zeros allowed).
+    """
+    agree = agree / pairs
     chance = float(counts @ counts) / float(counts.sum()) ** 2
     if chance >= 1.0:
         return 0.0
@@ -132,26 +177,53 @@ def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
     coupling : float
         The penalty per disagreeing neighbour that was used (cost units; 0 = unchanged).
     """
-    lab = np.asarray(labels, dtype=np.int64).copy()
+    lab = np.array(labels, dtype=np.int64)                           # a copy
     keep = lab >= 0
     n = costs.shape[1]
-    if n < 2 or neighbours.shape[1] == 0 or np.count_nonzero(keep) < 2:
+    n_keep = np.count_nonzero(keep)
+    if n < 2 or neighbours.shape[1] == 0 or n_keep < 2:
         return lab, 0.0
     data = np.where(np.isfinite(costs), costs, np.inf)
-    scale = median(np.min(data[keep], axis=1))
-    coupling = weight * label_coherence(lab, neighbours) * scale
+    # the best cost of every track as the minimum over the few bodies taken column by column
+    # (the same values as data.min(axis=1): no nan here; faster along a short axis)
+    best = data[:, 0]
+    for b in range(1, n):
+        best = np.minimum(best, data[:, b])
+    scale = median(best[keep])
+    # every track's neighbours counted by label in one bincount: bin 0 = unlabelled (or a pad),
+    # bin 1 + b = label b. The same integers as comparing every neighbour with every body, in
+    # a few calls instead of (N, k, n) temporaries reduced over a middle axis
+    size, k = neighbours.shape
+    width = max(n, int(lab.max()) + 1) + 1
+    offsets = np.arange(0, size * width, width)
+    codes = np.zeros(size + 1, dtype=np.int64)         # a -1 pad reads the last entry: bin 0
+
+    def tally(cur: np.ndarray) -> np.ndarray:
+        np.add(cur, 1, out=codes[:size])
+        idx = codes[neighbours]
+        idx += offsets[:, None]
+        return np.bincount(idx.ravel(), minlength=size * width)
+
+    cnt = tally(np.maximum(lab, -1))
+    # label_coherence's counts: labelled neighbours of the labelled tracks, and those among
+    # them with the track's own label
+    rows = keep.nonzero()[0]
+    pairs = k * n_keep - int(cnt[offsets[rows]].sum())
+    if pairs == 0:
+        return lab, 0.0
+    agree = int(cnt[offsets[rows] + codes[rows]].sum())
+    coupling = weight * _coherence(agree, pairs, np.bincount(codes[rows])) * scale
     if not coupling > 0.0:
         return lab, 0.0
-    valid = neighbours >= 0
-    nb = np.maximum(neighbours, 0)
-    bodies = np.arange(n)
-    for _ in range(sweeps):
-        nl = np.where(valid, lab[nb], -1)
-        votes = np.sum(nl[:, :, None] == bodies, axis=1)             # (N, n)
-        present = np.sum(nl >= 0, axis=1, keepdims=True)
-        new = np.argmin(data + coupling * (present - votes), axis=1)
-        new = np.where(keep, new, -1)
-        if np.array_equal(new, lab):
+    drop = (~keep).nonzero()[0]
+    for sweep in range(sweeps):
+        if sweep:
+            cnt = tally(lab)
+        cnt = cnt.reshape(size, width)
+        # labelled neighbours with another label: (present - votes) of every body
+        new = (data + coupling * ((k - cnt[:, :1]) - cnt[:, 1:n + 1])).argmin(axis=1)
+        new[drop] = -1
+        if (new == lab).all():
             break
         lab = new
     return lab, coupling
