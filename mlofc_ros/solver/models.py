@@ -65,7 +65,7 @@ def _track_stats(flows: LineFlows, weighted: bool) -> TrackStats:
     if weighted:
         # the 4x4 Gram matrix of every track's whitened rows holds A, g and k at once
         rows = flows.track_rows
-        gram = np.matmul(np.swapaxes(rows, 1, 2), rows)
+        gram = np.matmul(rows.transpose(0, 2, 1), rows)
         return TrackStats(gram[:, :3, :3], -gram[:, :3, 3], gram[:, 3, 3],
                           flows.pairs_per_track() > 0, True)
     M, b = flows.M, flows.b

@@ -80,14 +80,15 @@ def _neighbours(pts: np.ndarray, k: int, window: int) -> np.ndarray:
         return np.full((n, 0), -1, dtype=np.int64)
     if n <= EXACT_MAX:
         d = pts @ (-2.0 * pts.T)
+        # x^2 + y^2: the sums np.sum(pts * pts, axis=1) makes, without its length-2 reduction
         sq = pts * pts
-        sq = sq[:, 0] + sq[:, 1]            # np.sum over the rows' two entries, without it
+        sq = sq[:, 0] + sq[:, 1]
         d += sq[:, None]
         d += sq
         flat = d.reshape(-1)                # a view: masks by flat index, one call each
         flat[::n + 1] = np.inf
         # k argmins, each masking the one found: several times faster than argpartition
-        # along rows for k << N
+        # along rows for k << N (written as contiguous rows of a (k, N) array)
         out = np.empty((k, n), dtype=np.int64)
         starts = np.arange(0, n * n, n)
         for j in range(k):
@@ -208,10 +209,11 @@ def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
     # label_coherence's counts: labelled neighbours of the labelled tracks, and those among
     # them with the track's own label
     rows = keep.nonzero()[0]
-    pairs = k * n_keep - int(cnt[offsets[rows]].sum())
+    first = offsets[rows]
+    pairs = k * n_keep - int(cnt[first].sum())
     if pairs == 0:
         return lab, 0.0
-    agree = int(cnt[offsets[rows] + codes[rows]].sum())
+    agree = int(cnt[first + codes[rows]].sum())
     coupling = weight * _coherence(agree, pairs, np.bincount(codes[rows])) * scale
     if not coupling > 0.0:
         return lab, 0.0
