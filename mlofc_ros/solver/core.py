@@ -266,7 +266,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         # ids of bodies this model does not have are unknown
         init_labels = np.where((init_labels >= 0) & (init_labels < n), init_labels, -1)
         init_labels = init_labels.astype(np.int64)
-    rng = _LazyGenerator(seed)
+    rng = np.random.default_rng(seed)
     if method == 'general':
         rot = segment_lines(arr, n, intr, size, 'robust', seed=seed, init_labels=init_labels)
         return _general(arr, rot, rng, init_labels, _check_motions(init_motions, n))
@@ -303,25 +303,6 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     labels, c, costs, sub = _solve_known_f(flows, arr, n, method, rng, init_labels)
     info.update(sub, principal_point=centre, aspect=1.0, image_size=size)
     return _finish(flows, labels, c, costs, f, method, info)
-
-
-class _LazyGenerator:
-    """``np.random.default_rng(seed)``, made on first use (the same draws).
-
-    A warm-started solve, the common case in a stream, draws nothing, and seeding a generator
-    costs ~20 us, about 1% of such a solve.
-    """
-
-    __slots__ = ('_seed', '_rng')
-
-    def __init__(self, seed):
-        self._seed = seed
-        self._rng = None
-
-    def __getattr__(self, name: str):
-        if self._rng is None:
-            self._rng = np.random.default_rng(self._seed)
-        return getattr(self._rng, name)
 
 
 def _check_motions(init_motions, n: int) -> Optional[Tuple[np.ndarray, np.ndarray]]:

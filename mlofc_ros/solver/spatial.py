@@ -20,7 +20,7 @@ label) to the per-track costs and minimises it by iterated conditional modes. Th
 estimated from the labelling itself: when labels are spatially mixed (the paper's synthetic
 scenes of intermixed random lines) it is zero and nothing changes.
 """
-from typing import Optional, Tuple
+from typing import Tuple
 
 import numpy as np
 
@@ -54,26 +54,7 @@ def spatial_neighbours(points: np.ndarray, k: int = NEIGHBOURS, window: int = 16
     true 6 nearest ~0.97 on uniform and clustered points); a smoothness prior needs near
     neighbours, not exactly the nearest ones. Deterministic. ``-1`` pads when N <= k.
     """
-    global _last_neighbours
     pts = np.asarray(points, dtype=np.float64)
-    # the solves of one window at several focal lengths (and the 'general' method after the
-    # rotation-only one) ask for the same neighbours: the last answer is kept (copies out, so
-    # that no caller can change it)
-    key = (k, window, pts.shape, pts.tobytes())
-    last = _last_neighbours
-    if last is not None and last[0] == key:
-        return last[1].copy()
-    out = _neighbours(pts, k, window)
-    _last_neighbours = (key, out.copy())
-    return out
-
-
-#: ``(arguments, neighbours)`` of the last :func:`spatial_neighbours` call.
-_last_neighbours: Optional[Tuple[tuple, np.ndarray]] = None
-
-
-def _neighbours(pts: np.ndarray, k: int, window: int) -> np.ndarray:
-    """:func:`spatial_neighbours` of ``pts (N, 2)``, computed."""
     n = pts.shape[0]
     k = min(k, n - 1)
     if k <= 0:
