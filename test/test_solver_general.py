@@ -17,7 +17,8 @@ import pytest
 from scenes import random_scene
 
 from mlofc_ros.solver import segment_lines
-from mlofc_ros.solver.general import fit_body, general_warm, line_residuals, LineObservations
+from mlofc_ros.solver.general import (_lm_runs, fit_body, general_warm, line_residuals,
+                                      LineObservations, marginal_residuals)
 from mlofc_ros.solver.lines import rotation_matrix
 
 
@@ -117,3 +118,24 @@ def test_init_motions_are_checked_and_used():
     res = segment_lines(tracks, 1, intrinsics=intr, method='general', init_labels=labels,
                         init_motions=(np.full((1, 3), np.nan), np.full((1, 3), np.nan)))
     assert res.info['start'] != 'warm'
+
+
+def test_batched_evaluations_and_lockstep_fits_match_single_ones_bit_for_bit():
+    # the LM is sensitive to the last bit (its optimum is flat): a batch of motions or of runs
+    # must give each exactly what it gets alone
+    a, w_a, t_a = spinning_lines(n_lines=20, seed=6)
+    obs = LineObservations(a, (F, F, C, C))
+    idx = np.arange(20)
+    W = w_a + np.array([[0.0, 0.0, 0.0], [1e-3, 0.0, -2e-3], [0.0, 5e-3, 0.0]])
+    T = np.array([t_a * 0.02, [0.01, 0.0, 0.03], [0.0, 0.0, 0.0]])
+    _, n0 = marginal_residuals(obs, idx, W[0], T[0], 2.0)
+    for fixed in (None, n0):
+        batch = marginal_residuals(obs, idx, W, T, 2.0, n0, fixed)[0]
+        for s in range(3):
+            assert np.array_equal(batch[s], marginal_residuals(obs, idx, W[s], T[s], 2.0, n0,
+                                                               fixed)[0])
+    for sigma2 in (None, 2.0):
+        Wf, Tf, cost = _lm_runs(obs, idx, W, T, 6, sigma2)
+        for s in range(3):
+            w, t, c = fit_body(obs, idx, W[s], T[s], 6, sigma2)
+            assert np.array_equal(w, Wf[s]) and np.array_equal(t, Tf[s]) and c == cost[s]

@@ -74,41 +74,135 @@ class LineObservations:
 
 
 def _motion_terms(w: np.ndarray, t: np.ndarray, n_frames: int) -> Tuple[np.ndarray, np.ndarray]:
-    """``R^k`` and ``T_k`` for k = 0..K-1 (``(K, 3, 3)``, ``(K, 3)``)."""
+    """``R^k (..., K, 3, 3)`` and ``T_k (..., K, 3)``, k = 0..K-1, of motions ``w, t (..., 3)``.
+
+    Leading axes batch several motions: each gets the same products as when alone.
+    """
     R = rotation_matrix(w)
-    Rk = np.empty((n_frames, 3, 3))
-    Tk = np.zeros((n_frames, 3))
-    Rk[0] = np.eye(3)
+    lead = R.shape[:-2]
+    Rk = np.empty(lead + (n_frames, 3, 3))
+    Tk = np.zeros(lead + (n_frames, 3))
+    Rk[..., 0, :, :] = np.eye(3)
     for k in range(1, n_frames):                       # a few frames, not lines
-        Rk[k] = R @ Rk[k - 1]
-        Tk[k] = R @ Tk[k - 1] + t
+        Rk[..., k, :, :] = R @ Rk[..., k - 1, :, :]
+        Tk[..., k, :] = (R @ Tk[..., k - 1, :, None])[..., 0] + t
     return Rk, Tk
 
 
-def _design(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
-            base: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Linear constraints of the tracks ``idx`` on their moment and direction.
+def _design(rows: np.ndarray, w: np.ndarray, t: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Linear constraints of tracks with observation rows ``rows (L, K, 2, 3)`` (whitened).
 
-    Returns ``An (L, 2K, 3)`` acting on the moment ``n0`` and ``M (L, 2K, 2)`` acting on the
-    direction ``v0`` written in the orthonormal basis of the plane orthogonal to ``base (L, 3)``
-    (whitened rows: unit variance at 1 px endpoint noise).
+    ``w, t (..., 3)``: one motion or a batch of them (leading axes ``...``). Returns
+    ``An (..., L, 2K, 3)`` acting on the moment ``n0`` and ``Av (..., L, 2K, 3)`` acting on the
+    direction ``v0``; both are independent of the basis of ``v0`` (:func:`_direction_columns`),
+    so a second pass at the same motion reuses them.
     """
-    rows = obs.rows[idx]                                             # (L, K, 2, 3)
     L, K = rows.shape[0], rows.shape[1]
     Rk, Tk = _motion_terms(w, t, K)
-    # (R^-k e) . n0 = e . R^k n0  ->  rows @ R^k ; e . (T_k x R^k v0) = (e x T_k) . R^k v0
-    An = np.einsum('lkji,kim->lkjm', rows, Rk).reshape(L, 2 * K, 3)
-    ex = np.cross(rows, Tk[None, :, None, :])
-    Av = np.einsum('lkji,kim->lkjm', ex, Rk).reshape(L, 2 * K, 3)
-    return An, Av @ orthonormal_pair(base)
+    lead = Rk.shape[:-3]
+    # (R^-k e) . n0 = e . R^k n0  ->  rows @ R^k ; e . (T_k x R^k v0) = (e x T_k) . R^k v0.
+    # Written out term by term, lines last: long contiguous inner loops over the lines instead
+    # of einsum's 3-long ones (3-5x faster on a batch), and the same products and sums in the
+    # same order as einsum('lkji,kim->lkjm') and np.cross, so bit for bit the same result.
+    rT = np.ascontiguousarray(np.moveaxis(rows, 0, -1))             # (K, 2, 3, L)
+    r = [np.ascontiguousarray(rT[:, :, i, None, :]) for i in range(3)]  # (K, 2, 1, L)
+    Rb = Rk[..., :, None, :, :, None]                                # (..., K, 1, 3, 3, 1)
+    Tb = Tk[..., :, None, :, None]                                   # (..., K, 1, 3, 1)
+    An = r[0] * Rb[..., 0, :, :] + r[1] * Rb[..., 1, :, :] + r[2] * Rb[..., 2, :, :]
+    ex = [r[1] * Tb[..., 2, None, :] - r[2] * Tb[..., 1, None, :],  # e x T_k
+          r[2] * Tb[..., 0, None, :] - r[0] * Tb[..., 2, None, :],
+          r[0] * Tb[..., 1, None, :] - r[1] * Tb[..., 0, None, :]]
+    Av = ex[0] * Rb[..., 0, :, :] + ex[1] * Rb[..., 1, :, :] + ex[2] * Rb[..., 2, :, :]
+    # (..., K, 2, 3, L) -> (..., L, 2K, 3), C-contiguous as einsum's output was: the matrix
+    # products downstream then take the same BLAS path per line (a strided operand would take
+    # numpy's own loop, whose rounding may differ)
+    An = np.ascontiguousarray(np.moveaxis(An, -1, -4)).reshape(lead + (L, 2 * K, 3))
+    Av = np.ascontiguousarray(np.moveaxis(Av, -1, -4)).reshape(lead + (L, 2 * K, 3))
+    return An, Av
+
+
+def _direction_columns(Av: np.ndarray, base: np.ndarray,
+                       basis: Optional[np.ndarray] = None) -> np.ndarray:
+    """``M (..., L, 2K, 2)``: the direction columns ``Av`` in the plane orthogonal to ``base``.
+
+    ``base (..., L, 3)``; ``basis``: its :func:`.orthonormal_pair` if already computed.
+    """
+    return Av @ (orthonormal_pair(base) if basis is None else basis)
 
 
 def _smallest(P: np.ndarray, base: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Smallest eigenvalue ``(L,)`` of ``P^T P``, its unit eigenvector ``(L, 3)`` (sign: base)."""
-    val, vec = np.linalg.eigh(np.swapaxes(P, 1, 2) @ P)
+    """Smallest eigenvalue ``(..., L)`` of ``P^T P`` and its unit eigenvector ``(..., L, 3)``.
+
+    ``P (..., L, R, 3)``; the eigenvector's sign follows ``base (..., L, 3)``.
+    """
+    val, vec = np.linalg.eigh(np.swapaxes(P, -1, -2) @ P)
     n0 = vec[..., 0]
-    n0 *= np.where(np.sum(n0 * base, axis=1) < 0, -1.0, 1.0)[:, None]
-    return np.maximum(val[:, 0], 0.0), n0
+    n0 *= np.where(np.sum(n0 * base, axis=-1) < 0, -1.0, 1.0)[..., None]
+    return np.maximum(val[..., 0], 0.0), n0
+
+
+def _apply(P: np.ndarray, n0: np.ndarray) -> np.ndarray:
+    """Residual vectors ``(..., L, R)`` of constraints ``P (..., L, R, 3)`` at ``n0 (..., L, 3)``.
+
+    Summed term by term in a fixed order: the float result is then the same for every memory
+    layout and batch shape (einsum picks its summation kernel by the operands' strides), and
+    the same as einsum's with the strided moments the eigensolver returns.
+    """
+    n0 = n0[..., None, :]
+    return P[..., 0] * n0[..., 0] + P[..., 1] * n0[..., 1] + P[..., 2] * n0[..., 2]
+
+
+def _line_eval(An: np.ndarray, AvB: np.ndarray, base: np.ndarray,
+               fixed: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """:func:`line_residuals` from the constraints ``An``, ``AvB`` (:func:`_design`), batched."""
+    # orthonormal basis of the two columns (Gram-Schmidt, vectorised), then project them out
+    q1 = AvB[..., 0]
+    n1 = np.linalg.norm(q1, axis=-1, keepdims=True)
+    q1 = np.where(n1 > 1e-12, q1 / np.maximum(n1, 1e-300), 0.0)
+    q2 = AvB[..., 1] - q1 * np.sum(q1 * AvB[..., 1], axis=-1, keepdims=True)
+    n2 = np.linalg.norm(q2, axis=-1, keepdims=True)
+    q2 = np.where(n2 > 1e-12 * np.maximum(n1, 1.0), q2 / np.maximum(n2, 1e-300), 0.0)
+    P = An - q1[..., None] * np.einsum('...r,...rc->...c', q1, An)[..., None, :]
+    P = P - q2[..., None] * np.einsum('...r,...rc->...c', q2, P)[..., None, :]
+    if fixed is not None:
+        return _apply(P, fixed), fixed
+    return _smallest(P, base)
+
+
+def _marginal_eval(An: np.ndarray, M: np.ndarray, base: np.ndarray, sigma2: float,
+                   fixed: Optional[np.ndarray] = None, logdet_out: Optional[list] = None
+                   ) -> Tuple[np.ndarray, np.ndarray]:
+    """:func:`marginal_residuals` from the constraints ``An``, ``M`` (:func:`_design`), batched."""
+    M = M / np.sqrt(sigma2)
+    Mt = np.swapaxes(M, -1, -2)
+    s2, V = np.linalg.eigh(Mt @ M)                                  # (..., L, 2), (..., L, 2, 2)
+    s2 = np.maximum(s2, 0.0)
+    q = np.sqrt(1.0 + s2)
+    # (I + M M^T)^-1/2 = I - M V diag(h) V^T M^T, h = (1 - 1/q) / s2 written stably
+    H = (V * (1.0 / (q * (1.0 + q)))[..., None, :]) @ np.swapaxes(V, -1, -2)
+    P = An - M @ (H @ (Mt @ An))
+    logdet = sigma2 * np.sum(np.log1p(s2), axis=-1)
+    if logdet_out is not None:
+        logdet_out.append(logdet)
+    if fixed is not None:
+        return np.concatenate([_apply(P, fixed),
+                               np.sqrt(logdet)[..., None]], axis=-1), fixed
+    val, n0_new = _smallest(P, base)
+    return val + logdet, n0_new
+
+
+def _evaluate(An: np.ndarray, Av: np.ndarray, base: np.ndarray, sigma2: Optional[float],
+              fixed: Optional[np.ndarray] = None, basis: Optional[np.ndarray] = None,
+              logdet_out: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """Costs and moments (or residual vectors at ``fixed``) from :func:`_design`'s output.
+
+    ``sigma2`` None: :func:`line_residuals`, else :func:`marginal_residuals`; every array may
+    carry leading batch axes.
+    """
+    M = _direction_columns(Av, base, basis)
+    if sigma2 is None:
+        return _line_eval(An, M, base, fixed)
+    return _marginal_eval(An, M, base, sigma2, fixed, logdet_out)
 
 
 def line_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
@@ -122,19 +216,8 @@ def line_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.
     instead of the minimal costs (for Gauss-Newton by variable projection).
     """
     base = obs.m_first[idx] if n0 is None else n0
-    An, AvB = _design(obs, idx, w, t, base)
-    # orthonormal basis of the two columns (Gram-Schmidt, vectorised), then project them out
-    q1 = AvB[..., 0]
-    n1 = np.linalg.norm(q1, axis=1, keepdims=True)
-    q1 = np.where(n1 > 1e-12, q1 / np.maximum(n1, 1e-300), 0.0)
-    q2 = AvB[..., 1] - q1 * np.sum(q1 * AvB[..., 1], axis=1, keepdims=True)
-    n2 = np.linalg.norm(q2, axis=1, keepdims=True)
-    q2 = np.where(n2 > 1e-12 * np.maximum(n1, 1.0), q2 / np.maximum(n2, 1e-300), 0.0)
-    P = An - q1[..., None] * np.einsum('lr,lrc->lc', q1, An)[:, None, :]
-    P = P - q2[..., None] * np.einsum('lr,lrc->lc', q2, P)[:, None, :]
-    if fixed is not None:
-        return np.einsum('lrc,lc->lr', P, fixed), fixed
-    return _smallest(P, base)
+    An, Av = _design(obs.rows[idx], w, t)
+    return _evaluate(An, Av, base, None, fixed)
 
 
 def marginal_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
@@ -164,44 +247,139 @@ def marginal_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t:
     cost).
     """
     base = obs.m_first[idx] if n0 is None else n0
-    An, M = _design(obs, idx, w, t, base)
-    M = M / np.sqrt(sigma2)
-    s2, V = np.linalg.eigh(np.swapaxes(M, 1, 2) @ M)                # (L, 2), (L, 2, 2)
-    s2 = np.maximum(s2, 0.0)
-    q = np.sqrt(1.0 + s2)
-    # (I + M M^T)^-1/2 = I - M V diag(h) V^T M^T, h = (1 - 1/q) / s2 written stably
-    H = (V * (1.0 / (q * (1.0 + q)))[:, None, :]) @ np.swapaxes(V, 1, 2)
-    P = An - M @ (H @ (np.swapaxes(M, 1, 2) @ An))
-    logdet = sigma2 * np.sum(np.log1p(s2), axis=1)
-    if logdet_out is not None:
-        logdet_out.append(logdet)
-    if fixed is not None:
-        return np.concatenate([np.einsum('lrc,lc->lr', P, fixed),
-                               np.sqrt(logdet)[:, None]], axis=1), fixed
-    val, n0_new = _smallest(P, base)
-    return val + logdet, n0_new
+    An, Av = _design(obs.rows[idx], w, t)
+    return _evaluate(An, Av, base, sigma2, fixed, logdet_out=logdet_out)
 
 
-def _residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
-               sigma2: Optional[float], n0: Optional[np.ndarray] = None,
-               fixed: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
-    """:func:`line_residuals` (``sigma2`` None) or :func:`marginal_residuals`."""
-    if sigma2 is None:
-        return line_residuals(obs, idx, w, t, n0, fixed)
-    return marginal_residuals(obs, idx, w, t, sigma2, n0, fixed)
-
-
-def _costs2(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
-            sigma2: Optional[float], n0: Optional[np.ndarray] = None
+def _costs2(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
+            sigma2: Optional[float], basis: Optional[np.ndarray] = None
             ) -> Tuple[np.ndarray, np.ndarray]:
-    """Costs ``(L,)`` and moments after two passes (the v0-plane basis follows the moment)."""
-    res, n0 = _residuals(obs, idx, w, t, sigma2, n0)
-    return _residuals(obs, idx, w, t, sigma2, n0)
+    """Costs ``(..., L)`` and moments after two passes (the v0-plane basis follows the moment).
+
+    ``rows (L, K, 2, 3)``: the tracks' observation rows; ``w, t (..., 3)`` one motion or a
+    batch; ``base (L, 3)`` or ``(..., L, 3)`` the first pass's moments, ``basis`` their
+    :func:`.orthonormal_pair` if known. Both passes share the motion's constraints.
+    """
+    An, Av = _design(rows, w, t)
+    _, n0 = _evaluate(An, Av, base, sigma2, basis=basis)
+    return _evaluate(An, Av, n0, sigma2)
 
 
 def _tangent(t: np.ndarray) -> np.ndarray:
     """Two unit vectors ``(2, 3)`` orthogonal to the unit vector ``t``."""
     return np.swapaxes(orthonormal_pair(t[None])[0], 0, 1)
+
+
+#: LM step tries per lockstep round of the line search (8 in all, the damping x5 per try;
+#: the first success counts, later tries of the round are wasted). The first try succeeds in
+#: ~85% of the iterations; after a failure ~3/4 succeed within three more. One batched call
+#: for several tries costs little more than one: on Hopkins155 and pipeline windows (1, 3, 4)
+#: was ~5% faster than one try per round, (1, 7) no faster.
+_TRIES = (1, 3, 4)
+
+#: Largest batch (motions x tracks x frames) of the start scan's cost evaluations: bounds the
+#: temporaries (a few tens of floats per unit).
+_BATCH = 50000
+
+
+def _scan_costs(rows: np.ndarray, base: np.ndarray, w: np.ndarray, T: np.ndarray,
+                sigma2: Optional[float]) -> list:
+    """Total two-pass cost of the tracks ``rows`` at ``w (3,)`` and each T of ``T (C, 3)``."""
+    size = max(1, _BATCH // max(rows.shape[0] * rows.shape[1], 1))
+    out: list = []
+    for s in range(0, T.shape[0], size):                 # chunks of many candidates
+        t = T[s:s + size]
+        res, _ = _costs2(rows, base, np.broadcast_to(w, t.shape), t, sigma2)
+        out += [r.sum() for r in res]                    # per candidate: a sum as in a loop
+    return out
+
+
+def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndarray,
+             iterations: int, sigma2: Optional[float]
+             ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Independent :func:`fit_body` runs from ``(W0, T0) (S, 3)`` on the same tracks.
+
+    Returns ``W (S, 3)``, ``T (S, 3)`` and costs ``(S,)``. The runs advance in lockstep so that
+    every numpy call serves all of them (and, for the Jacobian, its 2 x 5 or 2 x 6 central
+    differences too): each call is dominated by its fixed overhead at these sizes (tens of
+    tracks), so one batched call costs little more than a single evaluation. Each run takes
+    exactly the steps it takes alone: the batched operations repeat its products per motion.
+    """
+    rows = obs.rows[idx]                                 # gathered once for all evaluations
+    free = sigma2 is not None
+    n_run = W0.shape[0]
+    W = np.array(W0, dtype=float)
+    T = np.array(T0, dtype=float)
+    if not free:
+        for s in range(n_run):                           # a few runs, not lines
+            nt = np.linalg.norm(T[s])
+            T[s] = T[s] / nt if nt > 1e-12 else np.array([0.0, 0.0, 1.0])
+    res, n0 = _costs2(rows, obs.m_first[idx], W, T, sigma2)
+    cost = [float(r.sum()) for r in res]
+    lam, h = [1e-3] * n_run, 1e-6
+    n_par = 6 if free else 5
+    # parameter offsets of the Jacobian (+-h per parameter) and the residual itself (row 0)
+    probe = np.zeros((1 + 2 * n_par, n_par))
+    probe[1::2, :][np.arange(n_par), np.arange(n_par)] = h
+    probe[2::2, :][np.arange(n_par), np.arange(n_par)] = -h
+    active = np.arange(n_run)                            # runs still iterating
+    for _ in range(iterations):
+        if active.size == 0:
+            break
+        bases = [np.eye(3) if free else _tangent(T[s]) for s in active]
+
+        def moved(a: int, x: np.ndarray) -> np.ndarray:
+            tt = T[active[a]] + x[3:] @ bases[a]
+            return tt if free else tt / np.linalg.norm(tt)
+        Wp = W[active, None, :] + probe[:, :3]                     # (A, Q, 3)
+        if free:
+            # t + x @ I is exactly t + x: at most one non-zero product per element
+            Tp = T[active, None, :] + probe[:, 3:]
+        else:
+            Tp = np.stack([[moved(a, x) for x in probe]             # runs x probes, not lines
+                           for a in range(active.size)])
+        n0a = n0[active]
+        basis = orthonormal_pair(n0a)                   # shared by probes and the next pass
+        An, Av = _design(rows, Wp, Tp)
+        r = _evaluate(An, Av, n0a[:, None], sigma2, n0a[:, None], basis[:, None])[0]
+        r = r.reshape(active.size, probe.shape[0], -1)
+        systems = []
+        for a in range(active.size):                     # a few runs, not lines
+            # C order, as the column-by-column fill was: J^T J runs the same BLAS kernel
+            J = np.ascontiguousarray(((r[a, 1::2] - r[a, 2::2]) / (2.0 * h)).T)
+            systems.append((J.T @ J, J.T @ r[a, 0]))
+        searching, accepted = list(range(active.size)), {}
+        for n_try in _TRIES:
+            if not searching:
+                break
+            cand = []                                    # (run position, step, damping)
+            for a in searching:                          # a few runs and tries, not lines
+                H, g = systems[a]
+                lam_a = lam[active[a]]
+                for _ in range(n_try):
+                    step = -np.linalg.solve(H + lam_a * (np.diag(np.diag(H))
+                                                         + 1e-12 * np.eye(n_par)), g)
+                    cand.append((a, step, lam_a))
+                    lam_a *= 5.0
+            pos = [a for a, _, _ in cand]
+            cw = np.array([W[active[a]] + step[:3] for a, step, _ in cand])
+            ct = np.array([moved(a, step) for a, step, _ in cand])
+            rn, n0n = _costs2(rows, n0a[pos], cw, ct, sigma2, basis[pos])
+            for i, (a, step, lam_a) in enumerate(cand):  # each run's tries in order
+                s = active[a]
+                if a in accepted:
+                    continue
+                c = rn[i].sum()
+                if c < cost[s]:
+                    W[s], T[s], n0[s], cost[s] = cw[i], ct[i], n0n[i], float(c)
+                    lam[s] = max(lam_a / 5.0, 1e-12)
+                    accepted[a] = step
+                else:
+                    lam[s] = lam_a * 5.0
+            searching = [a for a in searching if a not in accepted]
+        active = active[[a for a in range(active.size)
+                         if a in accepted and not np.linalg.norm(accepted[a]) < 1e-12]]
+    return W, T, np.array(cost)
 
 
 def fit_body(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, t0: np.ndarray,
@@ -210,51 +388,16 @@ def fit_body(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, t0: np.ndar
     """Levenberg-Marquardt on ``(w, T)`` for the tracks ``idx``; returns w, T, cost.
 
     Variable projection: the per-line unknowns are eliminated, the Jacobian is taken of every
-    line's projected residual vector (central differences, moments held fixed). With
-    ``sigma2`` None (fitted line directions, :func:`line_residuals`) T is a unit vector that
-    moves in its tangent plane (five parameters, no gauge freedom); with ``sigma2`` (px^2,
-    marginalised directions, :func:`marginal_residuals`) T is free (six parameters, its
-    length is the body's translation scale).
+    line's projected residual vector (central differences, moments held fixed, all evaluated
+    in one batch: :func:`_lm_runs`). With ``sigma2`` None (fitted line directions,
+    :func:`line_residuals`) T is a unit vector that moves in its tangent plane (five
+    parameters, no gauge freedom); with ``sigma2`` (px^2, marginalised directions,
+    :func:`marginal_residuals`) T is free (six parameters, its length is the body's
+    translation scale).
     """
-    w = np.array(w0, dtype=float)
-    t = np.array(t0, dtype=float)
-    free = sigma2 is not None
-    if not free:
-        t = t / np.linalg.norm(t) if np.linalg.norm(t) > 1e-12 else np.array([0.0, 0.0, 1.0])
-    res, n0 = _costs2(obs, idx, w, t, sigma2)
-    cost = float(res.sum())
-    lam, h = 1e-3, 1e-6
-    n_par = 6 if free else 5
-    for _ in range(iterations):
-        basis = np.eye(3) if free else _tangent(t)
-
-        def moved(x: np.ndarray) -> np.ndarray:
-            tt = t + x[3:] @ basis
-            return tt if free else tt / np.linalg.norm(tt)
-
-        def vec(x: np.ndarray) -> np.ndarray:
-            return _residuals(obs, idx, w + x[:3], moved(x), sigma2, n0, fixed=n0)[0].ravel()
-        r0 = vec(np.zeros(n_par))
-        J = np.empty((r0.size, n_par))
-        for j in range(n_par):                          # five or six parameters
-            d = np.zeros(n_par)
-            d[j] = h
-            J[:, j] = (vec(d) - vec(-d)) / (2.0 * h)
-        H, g = J.T @ J, J.T @ r0
-        improved = False
-        for _ in range(8):
-            step = -np.linalg.solve(H + lam * (np.diag(np.diag(H)) + 1e-12 * np.eye(n_par)), g)
-            tn = moved(step)
-            rn, n0n = _costs2(obs, idx, w + step[:3], tn, sigma2, n0)
-            if rn.sum() < cost:
-                w, t, n0, cost = w + step[:3], tn, n0n, float(rn.sum())
-                lam = max(lam / 5.0, 1e-12)
-                improved = True
-                break
-            lam *= 5.0
-        if not improved or np.linalg.norm(step) < 1e-12:
-            break
-    return w, t, cost
+    W, T, cost = _lm_runs(obs, idx, np.atleast_2d(np.asarray(w0, dtype=float)),
+                          np.atleast_2d(np.asarray(t0, dtype=float)), iterations, sigma2)
+    return W[0], T[0], float(cost[0])
 
 
 def _hemisphere(n: int = 32) -> np.ndarray:
@@ -300,8 +443,8 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
                 extra.append(np.atleast_2d(t0))
             cands = np.concatenate(extra + [(dirs[:, None, :] * T_SCALES[:, None]
                                              ).reshape(-1, 3)])
-        scan = [_costs2(obs, idx, w0, t, sigma2)[0].sum()
-                for t in cands]                          # a few hundred starts, vectorised
+        scan = _scan_costs(obs.rows[idx], obs.m_first[idx], np.asarray(w0, dtype=float),
+                           cands, sigma2)                # a few hundred starts, vectorised
         starts = cands[np.argsort(scan)[:keep]]
     return _best_fit(obs, idx, w0, starts, iterations, sigma2)
 
@@ -315,12 +458,13 @@ def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np
     """
     if sigma2 is not None and np.all(np.any(starts != 0.0, axis=1)):
         starts = np.concatenate([starts, np.zeros((1, 3))])
-    best = None
-    for t in starts:                                     # a few starts, not lines
-        fit = fit_body(obs, idx, w0, t, iterations, sigma2)
-        if best is None or fit[2] < best[2]:
-            best = fit
-    return best
+    W, T, cost = _lm_runs(obs, idx, np.broadcast_to(np.asarray(w0, dtype=float), starts.shape),
+                          starts, iterations, sigma2)      # all starts in lockstep
+    best = 0
+    for s in range(1, cost.size):                        # a few starts, not lines
+        if cost[s] < cost[best]:
+            best = s
+    return W[best], T[best], float(cost[best])
 
 
 def general_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray,
@@ -331,10 +475,8 @@ def general_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray,
     marginalised (:func:`marginal_residuals`, T with its scale, ``sigma2`` px^2).
     ``nan`` for tracks with fewer than 3 frames (no constraint on a general motion).
     """
-    idx = np.arange(obs.n_tracks)
-    out = np.empty((obs.n_tracks, W.shape[0]))
-    for b in range(W.shape[0]):                          # bodies, not lines
-        out[:, b] = _costs2(obs, idx, W[b], T[b], sigma2)[0]
+    # all bodies in one batch
+    out = np.ascontiguousarray(_costs2(obs.rows, obs.m_first, W, T, sigma2)[0].T)
     out[obs.frames < 3] = np.nan
     return out
 
@@ -414,16 +556,12 @@ def marginal_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray, sigma2: 
 
     See :func:`marginal_residuals`; ``nan`` for tracks with fewer than 3 frames.
     """
-    idx = np.arange(obs.n_tracks)
-    out = np.empty((obs.n_tracks, W.shape[0]))
-    logdet = np.empty_like(out)
-    for b in range(W.shape[0]):                          # bodies, not lines
-        _, n0 = marginal_residuals(obs, idx, W[b], T[b], sigma2)
-        parts: list = []
-        out[:, b], _ = marginal_residuals(obs, idx, W[b], T[b], sigma2, n0, logdet_out=parts)
-        logdet[:, b] = parts[0]
+    An, Av = _design(obs.rows, W, T)                     # all bodies in one batch
+    _, n0 = _evaluate(An, Av, obs.m_first, sigma2)
+    parts: list = []
+    out = np.ascontiguousarray(_evaluate(An, Av, n0, sigma2, logdet_out=parts)[0].T)
     out[obs.frames < 3] = np.nan
-    return out, logdet
+    return out, np.ascontiguousarray(parts[0].T)
 
 
 def _assign_marginal(costs: np.ndarray, logdet: np.ndarray, dof: np.ndarray, sigma2: float,
@@ -611,21 +749,16 @@ def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np
     """
     if idx.size < 3:
         return np.full((3, 3), np.inf)
-    x = np.r_[w, t]
-    _, n0 = _costs2(obs, idx, w, t, sigma2 if marginal else None)
+    rows = obs.rows[idx]
+    _, n0 = _costs2(rows, obs.m_first[idx], w, t, sigma2 if marginal else None)
+    # the motion and its six forward differences, evaluated as one batch
+    X = np.r_[w, t] + np.concatenate([np.zeros((1, 6)), step * np.eye(6)])
+    An, Av = _design(rows, X[:, :3], X[:, 3:])
     if marginal:
-        def vec(dx: np.ndarray) -> np.ndarray:
-            return marginal_residuals(obs, idx, x[:3] + dx[:3], x[3:] + dx[3:], sigma2, n0,
-                                      fixed=n0)[0].ravel()
+        r = _evaluate(An, Av, n0, sigma2, n0)[0].reshape(7, -1)
     else:
-        def vec(dx: np.ndarray) -> np.ndarray:
-            return np.sqrt(line_residuals(obs, idx, x[:3] + dx[:3], x[3:] + dx[3:], n0)[0])
-    r0 = vec(np.zeros(6))
-    J = np.empty((r0.size, 6))
-    for j in range(6):                                   # six parameters
-        dx = np.zeros(6)
-        dx[j] = step
-        J[:, j] = (vec(dx) - r0) / step
+        r = np.sqrt(_evaluate(An, Av, n0, None)[0])
+    J = np.ascontiguousarray(((r[1:] - r[0]) / step).T)
     info = J.T @ J
     try:
         return sigma2 * np.linalg.pinv(info, rcond=1e-10)[:3, :3]
