@@ -55,37 +55,19 @@ def noise_sigma(costs: np.ndarray, labels: np.ndarray, dof: np.ndarray,
 
 def _sample_pairs(rng: np.random.Generator, pool: np.ndarray, mid: np.ndarray,
                   n_samples: int, neighbours: int = 6) -> np.ndarray:
-    """``(H, 2)`` track index pairs from ``pool``: half global, half spatially local.
-
-    A local pair joins a track to a random other pool track in its cell of a square grid over
-    the pool's midpoints ``mid (N, 2)`` (px) holding ``neighbours`` tracks per cell on average,
-    or to a global draw where the cell holds no other. ``pool``: sorted track indices.
-    """
-    at = rng.integers(0, pool.size, n_samples)                      # positions in the pool
-    first = pool[at]
-    second = pool[rng.integers(0, pool.size, n_samples)]
-    # a grid instead of the nearest neighbours: a sort of the pool instead of a distance matrix
-    # from the anchors and a partition of it (3-6x the time)
-    pts = mid[pool]
-    lo = pts.min(axis=0)
-    span = pts.max(axis=0) - lo
-    # the area per cell, no less than a 1-D spread of the pool needs
-    side = max(float(np.sqrt(span[0] * span[1] * neighbours / pool.size)),
-               float(span.max()) * neighbours / pool.size, 1e-9)
-    cell = ((pts - lo) / side).astype(np.int64)                     # >= 0: truncation = floor
-    key = cell[:, 0] * (int(cell[:, 1].max()) + 1) + cell[:, 1]
-    order = np.argsort(key, kind='stable')
-    rank = np.empty_like(order)
-    rank[order] = np.arange(pool.size)
-    sorted_key = key[order]
-    anchor = at[::2]
-    start = np.searchsorted(sorted_key, key[anchor], 'left')
-    count = np.searchsorted(sorted_key, key[anchor], 'right') - start
-    # uniform among the other count - 1 tracks of the cell: skip the anchor's own place
-    j = (rng.random(anchor.size) * np.maximum(count - 1, 1)).astype(np.int64)
-    j += (j >= rank[anchor] - start) & (count > 1)
-    local = pool[order[start + j]]
-    second[::2] = np.where(count > 1, local, second[::2])
+    """``(H, 2)`` track index pairs from ``pool``: half global, half spatially local."""
+    first = rng.choice(pool, size=n_samples)
+    second = rng.choice(pool, size=n_samples)
+    local = np.arange(n_samples) % 2 == 0
+    if pool.size > 2 and np.any(local):
+        # the same values as np.linalg.norm over the last axis, without its slow length-2
+        # reduction
+        dx = mid[first[local], 0, None] - mid[None, pool, 0]
+        dy = mid[first[local], 1, None] - mid[None, pool, 1]
+        d = np.sqrt(dx * dx + dy * dy)
+        k = min(neighbours, pool.size - 1)
+        near = np.argpartition(d, k, axis=1)[:, 1:k + 1]               # skip itself
+        second[local] = pool[near[np.arange(near.shape[0]), rng.integers(0, k, near.shape[0])]]
     same = first == second
     second[same] = pool[(np.searchsorted(pool, first[same]) + 1) % pool.size]
     return np.stack([first, second], axis=1)
@@ -119,38 +101,27 @@ def sequential_msac(stats: TrackStats, tracks: np.ndarray, n: int, dof: np.ndarr
     largest remaining body), so no noise level is needed up front; the noise is then estimated
     from the first, largest body and sets the chi-square inlier bound.
     """
+    mid = first_midpoints(tracks)
     labels = np.full(stats.A.shape[0], -1, dtype=np.int64)
     pool = np.flatnonzero(stats.usable)
-    if n < 1 or pool.size < 2:
-        return labels, 1.0
-    mid = first_midpoints(tracks)
-    scale = 1.0 / np.maximum(dof, 1.0)
-    # [A, g, k] of every track: a pair's normal equations are the sum of two rows, and the
-    # per-dof costs c^T A c - 2 g . c + k of the pool under every hypothesis are one
-    # (|pool|, 13) x (13, H) product (quad_costs of all tracks, then a division: 3x the time)
-    stacked = np.concatenate([stats.A.reshape(-1, 9), stats.g, stats.k[:, None]], axis=1)
-    coef = stacked * scale[:, None]
-    bound = chi2_quantile(OUTLIER_P, dof) * scale
     sigma2 = None
     for body in range(n):
         if pool.size < 2:
             break
         # the last body too is a hypothesis search: what is left also holds the outliers
         pairs = _sample_pairs(rng, pool, mid, n_samples)
-        both = stacked[pairs[:, 0]] + stacked[pairs[:, 1]]
-        hyp = solve_normal_equations(both[:, :9].reshape(-1, 3, 3), both[:, 9:12])
-        terms = np.concatenate([(hyp[:, :, None] * hyp[:, None, :]).reshape(-1, 9),
-                                -2.0 * hyp, np.ones((hyp.shape[0], 1))], axis=1)
-        per_dof = np.maximum(coef[pool] @ terms.T, 0.0)                   # (|pool|, H)
-        if not stats.weighted:
-            per_dof /= 1.0 + np.sum(hyp * hyp, axis=1)
-        kth = _column_quantile(per_dof, 0.5 / (n - body))
+        hyp = solve_normal_equations(stats.A[pairs[:, 0]] + stats.A[pairs[:, 1]],
+                                     stats.g[pairs[:, 0]] + stats.g[pairs[:, 1]])
+        costs = quad_costs(stats, hyp)[pool]                          # (|pool|, H)
+        per_dof = costs / np.maximum(dof[pool, None], 1.0)
+        q = 0.5 / (n - body)
+        kth = _column_quantile(per_dof, q)
         best = int(np.argmin(kth))
         if sigma2 is None:
             # inliers of the best body: per-dof chi-square, median ~ chi2_median(d) / d
             d = float(np.median(dof[pool]))
             sigma2 = max(float(kth[best]) * d / float(chi2_quantile(0.5, d)), 1e-12)
-        inside = per_dof[:, best] < bound[pool] * sigma2
+        inside = costs[:, best] < chi2_quantile(OUTLIER_P, dof[pool]) * sigma2
         labels[pool[inside]] = body
         pool = pool[~inside]
     return labels, float(np.sqrt(sigma2)) if sigma2 is not None else 1.0
