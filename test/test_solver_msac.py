@@ -11,7 +11,7 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Sequential MSAC, the robust solver's sampled start: its sampling and scoring helpers."""
+"""Sequential MSAC, the robust solver's sampled start: its scoring quantile."""
 import numpy as np
 import pytest
 
