@@ -15,7 +15,7 @@
 import numpy as np
 import pytest
 
-from mlofc_ros.tracks.tracker import LineTracker, refine_lines
+from mlofc_ros.tracks.tracker import _remap_velocity, LineTracker, refine_lines
 
 
 @pytest.fixture(scope='module')
@@ -117,6 +117,21 @@ def test_detect_every_frame_and_klt_prediction(sequence):
         # most tracks seen in frame 0 on a GT edge are on the same edge in frame 2
         same = sum(outs[2].get(i) == e for i, e in outs[0].items())
         assert same >= 0.7 * len(outs[0]), (kw, same, len(outs[0]))
+
+
+def test_remap_velocity_is_exact_for_affine_motion():
+    # an affine image motion p -> A p + b: the displacement along a line is affine in the
+    # position along it, so the remapped endpoint displacements are the true ones
+    a = np.array([[0.02, -0.05], [0.05, 0.01]])
+    b = np.array([3.0, -1.5])
+    old = np.array([[100.0, 50.0, 180.0, 110.0]])
+    p_old = old.reshape(2, 2)
+    vel = (p_old @ a.T + b).reshape(1, 4)
+    u = (p_old[1] - p_old[0]) / 100.0                  # unit direction (length 100 px)
+    for t1, t2 in ((20.0, 60.0), (-15.0, 130.0)):      # cut by a detection / grown
+        p_new = p_old[0] + np.outer([t1, t2], u)
+        out = _remap_velocity(old, vel, p_new.reshape(1, 4))
+        np.testing.assert_allclose(out, (p_new @ a.T + b).reshape(1, 4), atol=1e-9)
 
 
 def test_refine_lines_recovers_shifted_edge():

@@ -482,6 +482,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--backend', default=None,
                     help='tracker detector backend (lsd, lsd_resize, fld, edlines)')
     ap.add_argument('--scale', type=float, default=None, help='tracker detector scale')
+    ap.add_argument('--bridge', action='store_true',
+                    help='tracker detector with LineDetector(bridge=True) (lines cut up by '
+                         'crossings)')
     ap.add_argument('--real-dir', default=REAL_DIR)
     ap.add_argument('--real-frames', type=int, default=80)
     ap.add_argument('--quick', action='store_true', help='10 frames, one seed (smoke run)')
@@ -531,6 +534,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         kw['detect_every'] = args.detect_every
     det_kw = {k: v for k, v in (('backend', args.backend), ('scale', args.scale))
               if v is not None}
+    if args.bridge:
+        det_kw['bridge'] = True
     if det_kw:
         kw['detector'] = LineDetector(**det_kw)
 
@@ -593,7 +598,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
                    'shared machine: compare against the LSD reference measured in the same run',
          'Tracker': f'LineTracker(detect_every={tracker.detect_every}, '
                     f'min_length={tracker.min_length:g}) with '
-                    f'LineDetector(backend={det.backend!r}, scale={det.scale:g})',
+                    f'LineDetector(backend={det.backend!r}, scale={det.scale:g}, '
+                    f'bridge={det.bridge})',
          'Run time': f'{seconds:.0f} s'})]
     lines += ['## Detectors on rendered frames', '',
               'Every 3rd frame of the rendered sequences below. A detection matches a GT edge '
