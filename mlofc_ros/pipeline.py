@@ -38,6 +38,7 @@ import numpy as np
 from mlofc_ros import params as _params
 from mlofc_ros.bodies import BodyTracker, relabel
 from mlofc_ros.camera import as_camera, CameraLike, CameraModel
+from mlofc_ros.segments.detect import LineDetector
 from mlofc_ros.solver import segment_lines
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_ros.tracks.undistort import undistort_segments
@@ -180,16 +181,18 @@ class Pipeline:
     # --- configuration -------------------------------------------------------------------
 
     def _make_tracker(self) -> LineTracker:
-        return LineTracker(min_length=float(self.params['min_segment_length']),
-                           detect_every=int(self.params['detect_every']))
+        length = float(self.params['min_segment_length'])
+        return LineTracker(LineDetector(min_length=length,
+                                        bridge=bool(self.params['bridge_crossings'])),
+                           min_length=length, detect_every=int(self.params['detect_every']))
 
     def reconfigure(self, **kwargs: Any) -> None:
         """Change parameters at run time; resets only what the change invalidates.
 
         ``window`` restarts the window; ``num_bodies`` restarts body numbering;
-        ``min_segment_length`` restarts the tracker and the window; ``detect_every`` changes
-        only the detection schedule (tracks carry on). Raises like the constructor,
-        changing nothing when any value is invalid.
+        ``min_segment_length`` restarts the tracker and the window; ``detect_every`` and
+        ``bridge_crossings`` change only the detection (tracks carry on). Raises like the
+        constructor, changing nothing when any value is invalid.
         """
         unknown = sorted(set(kwargs) - set(_params.PARAMS))
         if unknown:
@@ -201,9 +204,10 @@ class Pipeline:
             self._tracker = self._make_tracker()
             self.bodies.forget_tracks()
             self._restart_window()
-        elif 'detect_every' in changed:
-            # a schedule, not state: the tracks carry on
+        else:
+            # detection settings, not state: the tracks carry on
             self._tracker.detect_every = int(self.params['detect_every'])
+            self._tracker.detector.bridge = bool(self.params['bridge_crossings'])
         if 'window' in changed:
             self._window = TrackWindow(self.params['window'])
             self._stamps = deque(maxlen=self.params['window'])
