@@ -55,6 +55,9 @@ def test_score_run_counts_wrong_unassigned_and_omega_errors():
     row = spinning.build_rows([{'scene': 'x', 'seed': 0, 'method': 'robust', 'window': 5,
                                 'score': s}])[0]
     assert row[4] == 12.5 and row[6] == '10' and row[9] == 20.0
+    rec = {'scene': 'x', 'seed': 0, 'method': 'robust', 'window': 5, 'score': s}
+    summary = spinning.summary_rows([rec, dict(rec, seed=1)])
+    assert len(summary) == 1 and summary[0][3] == 2 and summary[0][4] == 12.5
 
 
 def test_spinning_is_registered():

@@ -31,6 +31,11 @@ runs (minus DDS). Scored on the frames with a full window, like ``python -m mlof
 - ``ms/frame``: CPU time of ``Pipeline.process`` per frame: median and p95 over the scored
   frames, max over all frames ('general' runs its full multi-start search on the first window
   of three frames and whenever tracking the previous motions leaves too few inliers).
+
+Every scene is rendered with several seeds (0, 1, 2 by default): one run is a single draw
+from a chaotic process (a body fitted in a wrong basin in one frame keeps it through the warm
+starts of the next), so runs of the same scene differ by up to 30 points. The goals of issue
+#6 are read on the summary over the seeds.
 """
 import argparse
 import math
@@ -128,7 +133,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--methods', default='robust,general', help='comma-separated solver methods')
     p.add_argument('--windows', default='5', help='comma-separated window lengths (frames)')
     p.add_argument('--frames', type=int, default=30, help='frames per sequence (30 Hz)')
-    p.add_argument('--seeds', default='0', help='comma-separated render seeds')
+    p.add_argument('--seeds', default='0,1,2', help='comma-separated render seeds')
     p.add_argument('--out', default=None, help='output folder (default docs/results)')
     return p.parse_args(list(argv))
 
@@ -156,6 +161,32 @@ def build_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
                      s.get('ms_max', float(ms.max()) if ms.size else math.nan)])
     return rows
 
+
+def summary_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
+    """One row per (scene, method, window) over its seeds: means and the omega errors.
+
+    Single runs are chaotic (a body that one frame fits in the wrong basin keeps it through
+    the warm starts), so the goals are read on these rows.
+    """
+    groups: Dict[Tuple[str, str, int], List[Dict[str, object]]] = {}
+    for r in records:
+        groups.setdefault((r['scene'], r['method'], r['window']), []).append(r['score'])
+    rows = []
+    for (scene, method, window), scores in groups.items():
+        err = np.concatenate([s['omega_err'][np.isfinite(s['omega_err'])] for s in scores])
+        rows.append([scene, method, window, len(scores),
+                     _pct(float(np.mean([s['wrong'] for s in scores]))),
+                     _pct(float(max(s['wrong'] for s in scores))),
+                     _pct(float(np.mean([s['unassigned'] for s in scores]))),
+                     f'{100 * np.median(err):.0f}' if err.size else '—',
+                     f'{np.mean(err <= 0.05):.2f}' if err.size else '—',
+                     float(np.median(np.concatenate([s['ms'] for s in scores])))])
+    return rows
+
+
+SUMMARY_HEADERS = ['scene', 'method', 'window', 'seeds', 'wrong % (mean)', 'wrong % (worst)',
+                   '-1 % (mean)', 'omega err % (median over boxes)', 'boxes with omega err <= 5%',
+                   'ms/frame median']
 
 HEADERS = ['scene', 'seed', 'method', 'window', 'wrong %', '-1 %', 'omega err % (boxes)',
            'LOS err % (boxes)', 'static |w| deg/s', 'ms/frame median', 'p95', 'max']
@@ -203,7 +234,9 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
          'Sequences': f'{args.frames} frames 640x480 at 30 Hz, 60-150 deg/s per box, '
                       'sensor noise 2 grey levels (mlofc_ros.render)',
          'Run time': f'{seconds:.0f} s'})
-    parts = [head, '', common.markdown_table(HEADERS, build_rows(records)), '',
+    parts = [head, '', '## Over the seeds', '',
+             common.markdown_table(SUMMARY_HEADERS, summary_rows(records)), '',
+             '## Every run', '', common.markdown_table(HEADERS, build_rows(records)), '',
              __doc__.split('\n\n', 1)[1].strip(), '']
     return '\n'.join(parts)
 
