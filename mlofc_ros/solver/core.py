@@ -19,8 +19,9 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 
 from .focal import first_order_focal, profile_cost, refine_focal
-from .general import (body_covariance, fit_body, general_search, general_warm, LineObservations,
-                      marginal_segmentation, NOISE_FACTOR, spatial_labels, WARM_INLIERS)
+from .general import (body_covariance, general_search, general_warm, LineObservations,
+                      marginal_segmentation, NOISE_FACTOR, polish_body, spatial_labels,
+                      WARM_INLIERS)
 from .gpca import algebraic_normals
 from .ksubspaces import assign, ksubspaces, total_cost
 from .lines import (cayley_jacobian, cayley_to_rotvec, first_midpoints, line_flows, LineFlows,
@@ -348,7 +349,7 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
                 sol = marginal_segmentation(obs, n, [('warm', warm['labels'])], warm['W'],
                                             warm['T'], NOISE_FACTOR * warm['sigma2'],
                                             rounds=2, iterations=4, neighbours=neighbours,
-                                            keep=1, first_iterations=4)
+                                            keep=1, first_iterations=4, pivots=False)
     if sol is None:
         starts = [('rotation-only', rot.labels), ('spatial', spatial_labels(arr, n, rng))]
         if init_labels is not None:
@@ -363,8 +364,8 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
     for b in range(n):                                    # bodies, not lines
         idx = np.flatnonzero(labels == b)
         if idx.size >= 3:
-            sol['W'][b], sol['T'][b], _ = fit_body(obs, idx, sol['W'][b], sol['T'][b],
-                                                   POLISH_ITERATIONS, sigma2)
+            sol['W'][b], sol['T'][b], _ = polish_body(obs, idx, sol['W'][b], sol['T'][b],
+                                                      POLISH_ITERATIONS, sigma2)
     cov = np.stack([body_covariance(obs, np.flatnonzero(labels == b), sol['W'][b],
                                     sol['T'][b], sigma2, marginal=True)
                     for b in range(n)])

@@ -37,7 +37,8 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from .lines import first_midpoints, interpretation_normals, orthonormal_pair, rotation_matrix
+from .lines import (first_midpoints, interpretation_normals, normalise_points, orthonormal_pair,
+                    rotation_matrix)
 
 Intrinsics = Tuple[float, float, float, float]
 
@@ -47,7 +48,8 @@ class LineObservations:
 
     ``rows (N, K, 2, 3)``: for each frame the two directions ``e`` orthogonal to ``m_k``, scaled
     by the inverse standard deviation of ``m_k`` along them (1 px endpoint noise), so that
-    ``rows . n_k / |n_k|`` has unit variance; zero where the track is missing.
+    ``rows . n_k / |n_k|`` has unit variance; zero where the track is missing. ``rays (N, 3)``:
+    the unit viewing ray through the midpoint of every track's first segment (camera frame).
     """
 
     def __init__(self, tracks: np.ndarray, intrinsics: Intrinsics) -> None:
@@ -67,6 +69,8 @@ class LineObservations:
         first = np.argmax(ok, axis=1)
         self.m_first = m[np.arange(m.shape[0]), first]
         self.frames = ok.sum(axis=1)
+        rays = normalise_points(first_midpoints(tracks), intrinsics)
+        self.rays = rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
     @property
     def n_tracks(self) -> int:
@@ -284,12 +288,15 @@ _BATCH = 50000
 
 def _scan_costs(rows: np.ndarray, base: np.ndarray, w: np.ndarray, T: np.ndarray,
                 sigma2: Optional[float]) -> list:
-    """Total two-pass cost of the tracks ``rows`` at ``w (3,)`` and each T of ``T (C, 3)``."""
+    """Total two-pass cost of the tracks ``rows`` at each motion ``(w, T)``.
+
+    ``T (C, 3)``; ``w (3,)`` for all of them or ``(C, 3)``, one per candidate.
+    """
     size = max(1, _BATCH // max(rows.shape[0] * rows.shape[1], 1))
+    w = np.broadcast_to(w, T.shape)
     out: list = []
     for s in range(0, T.shape[0], size):                 # chunks of many candidates
-        t = T[s:s + size]
-        res, _ = _costs2(rows, base, np.broadcast_to(w, t.shape), t, sigma2)
+        res, _ = _costs2(rows, base, w[s:s + size], T[s:s + size], sigma2)
         out += [r.sum() for r in res]                    # per candidate: a sum as in a loop
     return out
 
@@ -400,13 +407,13 @@ def fit_body(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, t0: np.ndar
     return W[0], T[0], float(cost[0])
 
 
-def _hemisphere(n: int = 32) -> np.ndarray:
-    """Spread ``(n, 3)`` directions over a hemisphere (Fibonacci lattice).
+def _hemisphere(n: int = 32, whole: bool = False) -> np.ndarray:
+    """Spread ``(n, 3)`` directions over a hemisphere, or the ``whole`` sphere (Fibonacci).
 
     The cost depends on T only through its span, so T and -T are the same start.
     """
     k = np.arange(n) + 0.5
-    z = k / n
+    z = 1.0 - 2.0 * k / n if whole else k / n
     phi = np.pi * (1.0 + 5.0 ** 0.5) * k
     r = np.sqrt(1.0 - z * z)
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
@@ -420,16 +427,43 @@ T_STARTS = _hemisphere()
 T_SCALES = np.geomspace(3e-4, 0.3, 7)
 
 
+#: Rotation vectors (rad per frame) of the pivot starts (:func:`pivot_starts`): 64 axes over
+#: the whole sphere (the sign of W matters there, T follows from it) at six rates, 0.3 to 9
+#: degrees per frame.
+PIVOT_W = (_hemisphere(64, whole=True)[:, None, :] * np.geomspace(0.005, 0.16, 6)[:, None]).reshape(-1, 3)
+
+#: LM runs started from the best pivot starts of the scan (besides the ``keep`` others).
+PIVOT_KEEP = 4
+
+
+def pivot_starts(ray: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Motions ``W, T (C, 3)`` of a body turning about a point on the unit ``ray`` (3,).
+
+    An object that spins about its own centre ``C`` (a box turned on a table, a wheel) moves
+    as ``X' = R (X - C) + C``, so ``T = C - R C``: its image barely moves, and the
+    rotation-only fit, which sees a camera-centred rotation, is no start for W at all (its
+    translation cancels most of the rotation's flow). Here ``C`` is taken on the ray through
+    the body's lines at their distance (T in units of it, as the marginalised model's scale),
+    for every rotation of :data:`PIVOT_W`.
+    """
+    return PIVOT_W, ray - rotation_matrix(PIVOT_W) @ ray
+
+
 def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
                         t0: Optional[np.ndarray] = None, iterations: int = 15,
-                        keep: int = 3, sigma2: Optional[float] = None
+                        keep: int = 3, sigma2: Optional[float] = None,
+                        ray: Optional[np.ndarray] = None, pivots: bool = True
                         ) -> Tuple[np.ndarray, np.ndarray, float]:
     """Run :func:`fit_body` from the ``keep`` best starts of a scan at ``w0``.
 
     Fitted directions (``sigma2`` None): from ``t0``, or the best of :data:`T_STARTS` (the cost
     is not convex in the direction of T). Marginalised directions: the direction of ``t0``
     (else :data:`T_STARTS`) at every scale of :data:`T_SCALES`, ``t0`` itself and T = 0.
+    With ``ray`` (unit, camera frame: towards the body's lines), also from the
+    :data:`PIVOT_KEEP` best of :func:`pivot_starts` (when ``pivots``), and the winner's
+    :func:`necker_mirror` is tried too. The cheapest run wins.
     """
+    rows, base = obs.rows[idx], obs.m_first[idx]
     if sigma2 is None and t0 is not None:
         starts = np.atleast_2d(t0)
     else:
@@ -443,23 +477,71 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
                 extra.append(np.atleast_2d(t0))
             cands = np.concatenate(extra + [(dirs[:, None, :] * T_SCALES[:, None]
                                              ).reshape(-1, 3)])
-        scan = _scan_costs(obs.rows[idx], obs.m_first[idx], np.asarray(w0, dtype=float),
-                           cands, sigma2)                # a few hundred starts, vectorised
+        scan = _scan_costs(rows, base, np.asarray(w0, dtype=float), cands,
+                           sigma2)                       # a few hundred starts, vectorised
         starts = cands[np.argsort(scan)[:keep]]
-    return _best_fit(obs, idx, w0, starts, iterations, sigma2)
+    w_starts = None
+    if ray is not None and pivots:
+        pw, pt = pivot_starts(np.asarray(ray, dtype=float))
+        best = np.argsort(_scan_costs(rows, base, pw, pt, sigma2))[:PIVOT_KEEP]
+        w_starts = np.concatenate([np.broadcast_to(np.asarray(w0, dtype=float), starts.shape),
+                                   pw[best]])
+        starts = np.concatenate([starts, pt[best]])
+    fit = _best_fit(obs, idx, w0, starts, iterations, sigma2, w_starts)
+    return fit if ray is None else _necker_check(obs, idx, fit, ray, iterations, sigma2)
+
+
+def necker_mirror(w: np.ndarray, ray: np.ndarray) -> np.ndarray:
+    """Rotation vector ``(3,)`` of the depth-reversed motion of ``w`` seen along unit ``ray``.
+
+    Under (weak) perspective, an object turning by ``w`` and its mirror image in the plane
+    orthogonal to the line of sight, turning by ``2 (w . r) r - w``, give nearly the same
+    images (the Necker reversal); only perspective tells them apart. On small objects the
+    LM lands in the wrong one of the two basins as often as not.
+    """
+    return 2.0 * float(w @ ray) * ray - w
+
+
+def _necker_check(obs: LineObservations, idx: np.ndarray,
+                  fit: Tuple[np.ndarray, np.ndarray, float], ray: np.ndarray, iterations: int,
+                  sigma2: Optional[float]) -> Tuple[np.ndarray, np.ndarray, float]:
+    """Return ``fit`` or the LM run from its :func:`necker_mirror`, whichever is cheaper."""
+    w = necker_mirror(fit[0], ray)
+    t = ray - rotation_matrix(w) @ ray                   # the mirror turns about the pivot too
+    if sigma2 is None:
+        t = t * (np.linalg.norm(fit[1]) / max(np.linalg.norm(t), 1e-300))
+    W, T, cost = _lm_runs(obs, idx, w[None], t[None], iterations, sigma2)
+    return (W[0], T[0], float(cost[0])) if cost[0] < fit[2] else fit
+
+
+def polish_body(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
+                iterations: int, sigma2: float) -> Tuple[np.ndarray, np.ndarray, float]:
+    """Refit a segmented body at the measured noise ``sigma2``: LM from ``(w, t)`` and its mirror.
+
+    The segmentation's noise level is inflated (:data:`NOISE_FACTOR`), which flattens the cost
+    in W; at the measured noise the depth-reversed motion (:func:`necker_mirror`) may fit
+    better, so an LM run from it goes beside the one from ``(w, t)`` and the cheaper wins.
+    """
+    fit = _best_fit(obs, idx, w, np.atleast_2d(t), iterations, sigma2)
+    ray = obs.rays[idx].sum(axis=0)
+    return _necker_check(obs, idx, fit, ray / np.linalg.norm(ray), iterations, sigma2)
 
 
 def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np.ndarray,
-              iterations: int, sigma2: Optional[float]) -> Tuple[np.ndarray, np.ndarray, float]:
+              iterations: int, sigma2: Optional[float], w_starts: Optional[np.ndarray] = None
+              ) -> Tuple[np.ndarray, np.ndarray, float]:
     """Run :func:`fit_body` from ``w0`` and each T of ``starts (S, 3)``; the cheapest wins.
 
-    With marginalised directions (``sigma2``) T = 0 is always one of the starts: the cost is
-    even in T, so T = 0 is stationary and no LM run started at another T returns to it.
+    ``w_starts (S, 3)``: a rotation per start instead of ``w0`` for all. With marginalised
+    directions (``sigma2``) T = 0 (at ``w0``) is always one of the starts: the cost is even in
+    T, so T = 0 is stationary and no LM run started at another T returns to it.
     """
+    w0 = np.asarray(w0, dtype=float)
+    W0 = np.broadcast_to(w0, starts.shape) if w_starts is None else w_starts
     if sigma2 is not None and np.all(np.any(starts != 0.0, axis=1)):
         starts = np.concatenate([starts, np.zeros((1, 3))])
-    W, T, cost = _lm_runs(obs, idx, np.broadcast_to(np.asarray(w0, dtype=float), starts.shape),
-                          starts, iterations, sigma2)      # all starts in lockstep
+        W0 = np.concatenate([W0, w0[None]])
+    W, T, cost = _lm_runs(obs, idx, W0, starts, iterations, sigma2)   # all in lockstep
     best = 0
     for s in range(1, cost.size):                        # a few starts, not lines
         if cost[s] < cost[best]:
@@ -529,13 +611,14 @@ def _assign_within_bound(costs: np.ndarray, dof: np.ndarray, outlier_p: float
 def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
                    fitted: np.ndarray, iterations: int, w_start,
                    sigma2: Optional[float] = None, t_start=None, keep: int = 3,
-                   first_iterations: int = 15) -> None:
+                   first_iterations: int = 15, pivots: bool = True) -> None:
     """Refit every body with >= 3 tracks in place: LM from its motion, or multi-start.
 
     ``fitted (n,)`` marks bodies whose ``(W, T)`` is a fit already (LM for ``iterations``);
-    the others start a multi-start search at ``w_start(b)`` (and ``t_start(b)``) and become
-    fitted (``keep`` LM runs of ``first_iterations``). ``sigma2``: marginalised directions
-    (:func:`marginal_residuals`).
+    the others start a multi-start search at ``w_start(b)`` (and ``t_start(b)``), with
+    :func:`pivot_starts` towards the body's lines when ``pivots`` and a Necker check
+    (:func:`fit_body_multistart`), and become fitted (``keep`` LM runs of
+    ``first_iterations``). ``sigma2``: marginalised directions (:func:`marginal_residuals`).
     """
     for b in range(W.shape[0]):                               # bodies, not lines
         idx = np.flatnonzero(labels == b)
@@ -544,9 +627,10 @@ def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: 
         if fitted[b]:
             W[b], T[b], _ = _best_fit(obs, idx, W[b], np.atleast_2d(T[b]), iterations, sigma2)
         else:
+            ray = obs.rays[idx].sum(axis=0)
             W[b], T[b], _ = fit_body_multistart(
                 obs, idx, w_start(b), None if t_start is None else t_start(b),
-                first_iterations, keep, sigma2)
+                first_iterations, keep, sigma2, ray / np.linalg.norm(ray), pivots)
             fitted[b] = True
 
 
@@ -591,7 +675,8 @@ def _assign_marginal(costs: np.ndarray, logdet: np.ndarray, dof: np.ndarray, sig
 def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.ndarray,
                           T0: np.ndarray, sigma2: float, rounds: int = 8, iterations: int = 5,
                           outlier_p: float = 0.9999, neighbours: Optional[np.ndarray] = None,
-                          keep: int = 3, first_iterations: int = 15) -> dict:
+                          keep: int = 3, first_iterations: int = 15,
+                          pivots: bool = True) -> dict:
     """Segment with the marginalised-direction model (:func:`marginal_residuals`).
 
     Parameters
@@ -612,6 +697,8 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         Fit/assign rounds and LM iterations per body and round.
     keep, first_iterations : int
         LM runs (the best starts of the scan) and their iterations for a body's first fit.
+    pivots : bool
+        Whether a body's first fit also starts from :func:`pivot_starts`.
 
     Returns
     -------
@@ -631,7 +718,7 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         cap = np.full(obs.n_tracks, np.inf)
         for _ in range(rounds):
             _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b], sigma2,
-                           lambda b: T[b], keep, first_iterations)
+                           lambda b: T[b], keep, first_iterations, pivots)
             costs, logdet = marginal_costs(obs, W, T, sigma2)
             new, cap = _assign_marginal(costs, logdet, dof, sigma2, outlier_p, neighbours)
             if np.array_equal(new, lab):
