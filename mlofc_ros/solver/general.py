@@ -430,7 +430,8 @@ T_SCALES = np.geomspace(3e-4, 0.3, 7)
 #: Rotation vectors (rad per frame) of the pivot starts (:func:`pivot_starts`): 64 axes over
 #: the whole sphere (the sign of W matters there, T follows from it) at six rates, 0.3 to 9
 #: degrees per frame.
-PIVOT_W = (_hemisphere(64, whole=True)[:, None, :] * np.geomspace(0.005, 0.16, 6)[:, None]).reshape(-1, 3)
+PIVOT_W = (_hemisphere(64, whole=True)[:, None, :]
+           * np.geomspace(0.005, 0.16, 6)[:, None]).reshape(-1, 3)
 
 #: LM runs started from the best pivot starts of the scan (besides the ``keep`` others).
 PIVOT_KEEP = 4
