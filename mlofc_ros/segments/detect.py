@@ -522,5 +522,6 @@ class LineDetector:
                 if self.merge:
                     seg = merge_collinear(seg, self.merge_angle_deg, self.merge_offset_px,
                                           self.merge_gap_px, oriented=self.merge_oriented)
-        return np.ascontiguousarray(seg[segment_lengths(seg) >= self.min_length],
-                                    dtype=np.float32)
+                # a bridged line's fitted extent may fall a hair short of its pixel span
+                seg = seg[segment_lengths(seg) >= self.min_length]
+        return np.ascontiguousarray(seg, dtype=np.float32)

@@ -76,6 +76,11 @@ class LineObservations:
     def n_tracks(self) -> int:
         return self.rows.shape[0]
 
+    def body_ray(self, idx: np.ndarray) -> np.ndarray:
+        """Unit ray ``(3,)`` towards the tracks ``idx`` (their rays summed, camera frame)."""
+        ray = self.rays[idx].sum(axis=0)
+        return ray / np.linalg.norm(ray)
+
 
 def _motion_terms(w: np.ndarray, t: np.ndarray, n_frames: int) -> Tuple[np.ndarray, np.ndarray]:
     """``R^k (..., K, 3, 3)`` and ``T_k (..., K, 3)``, k = 0..K-1, of motions ``w, t (..., 3)``.
@@ -447,7 +452,12 @@ def pivot_starts(ray: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     the body's lines at their distance (T in units of it, as the marginalised model's scale),
     for every rotation of :data:`PIVOT_W`.
     """
-    return PIVOT_W, ray - rotation_matrix(PIVOT_W) @ ray
+    return PIVOT_W, _pivot_translation(PIVOT_W, ray)
+
+
+def _pivot_translation(w: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+    """Translation ``(..., 3)`` of turning by ``w (..., 3)`` about ``pivot (3,)``: ``c - R c``."""
+    return pivot - rotation_matrix(w) @ pivot
 
 
 def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
@@ -508,7 +518,7 @@ def _necker_check(obs: LineObservations, idx: np.ndarray,
                   sigma2: Optional[float]) -> Tuple[np.ndarray, np.ndarray, float]:
     """Return ``fit`` or the LM run from its :func:`necker_mirror`, whichever is cheaper."""
     w = necker_mirror(fit[0], ray)
-    t = ray - rotation_matrix(w) @ ray                   # the mirror turns about the pivot too
+    t = _pivot_translation(w, ray)                       # the mirror turns about the pivot too
     if sigma2 is None:
         t = t * (np.linalg.norm(fit[1]) / max(np.linalg.norm(t), 1e-300))
     W, T, cost = _lm_runs(obs, idx, w[None], t[None], iterations, sigma2)
@@ -521,11 +531,11 @@ def polish_body(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.nda
 
     The segmentation's noise level is inflated (:data:`NOISE_FACTOR`), which flattens the cost
     in W; at the measured noise the depth-reversed motion (:func:`necker_mirror`) may fit
-    better, so an LM run from it goes beside the one from ``(w, t)`` and the cheaper wins.
+    better, so an LM run from it goes beside the one from ``(w, t)`` (and from T = 0, as in
+    every :func:`_best_fit`) and the cheapest wins.
     """
     fit = _best_fit(obs, idx, w, np.atleast_2d(t), iterations, sigma2)
-    ray = obs.rays[idx].sum(axis=0)
-    return _necker_check(obs, idx, fit, ray / np.linalg.norm(ray), iterations, sigma2)
+    return _necker_check(obs, idx, fit, obs.body_ray(idx), iterations, sigma2)
 
 
 def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np.ndarray,
@@ -628,10 +638,9 @@ def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: 
         if fitted[b]:
             W[b], T[b], _ = _best_fit(obs, idx, W[b], np.atleast_2d(T[b]), iterations, sigma2)
         else:
-            ray = obs.rays[idx].sum(axis=0)
             W[b], T[b], _ = fit_body_multistart(
                 obs, idx, w_start(b), None if t_start is None else t_start(b),
-                first_iterations, keep, sigma2, ray / np.linalg.norm(ray), pivots)
+                first_iterations, keep, sigma2, obs.body_ray(idx), pivots)
             fitted[b] = True
 
 
