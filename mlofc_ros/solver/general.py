@@ -77,7 +77,7 @@ class LineObservations:
         return self.rows.shape[0]
 
     def body_ray(self, idx: np.ndarray) -> np.ndarray:
-        """Unit ray ``(3,)`` towards the tracks ``idx`` (their rays summed, camera frame)."""
+        """Return the unit ray ``(3,)`` towards the tracks ``idx`` (camera frame)."""
         ray = self.rays[idx].sum(axis=0)
         return ray / np.linalg.norm(ray)
 
@@ -455,9 +455,9 @@ def pivot_starts(ray: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     return PIVOT_W, _pivot_translation(PIVOT_W, ray)
 
 
-def _pivot_translation(w: np.ndarray, pivot: np.ndarray) -> np.ndarray:
-    """Translation ``(..., 3)`` of turning by ``w (..., 3)`` about ``pivot (3,)``: ``c - R c``."""
-    return pivot - rotation_matrix(w) @ pivot
+def _pivot_translation(w: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Return ``c - R c`` ``(..., 3)``: the translation of a turn ``w (..., 3)`` about ``c``."""
+    return c - rotation_matrix(w) @ c
 
 
 def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
