@@ -177,6 +177,10 @@ class Pipeline:
         # method 'general': the last motion (rad/frame, unit T) of every stable body id, the
         # warm start of the next window
         self._motions: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}
+        # 'general': the body whose tracked fit also rescans the pivot starts (one per frame in
+        # turn, so that a body tracked in a wrong basin can leave it at a fraction of the cost
+        # of rescanning all of them every frame)
+        self._rescan = 0
 
     # --- configuration -------------------------------------------------------------------
 
@@ -221,6 +225,7 @@ class Pipeline:
         self._restart_window()
         self.bodies.reset()
         self._motions.clear()
+        self._rescan = 0
         self._intervals.clear()
         self._last_stamp = None
         self._image_size = None
@@ -401,7 +406,7 @@ class Pipeline:
         res = None
         if fill >= 2 and len(win_ids) and not blank:     # a blank frame observes no motion
             init = self.bodies.previous_labels(win_ids) if n_req > 0 else None
-            motions = None
+            motions, rescan = None, None
             if init is not None:
                 init = np.where(init < n_req, init, -1)
                 if self.params['method'] == 'general' and self._motions:
@@ -409,11 +414,13 @@ class Pipeline:
                     for body, (w_b, t_b) in self._motions.items():
                         if body < n_req:
                             motions[0][body], motions[1][body] = w_b, t_b
+                    rescan = [self._rescan % n_req]
+                    self._rescan = (self._rescan + 1) % n_req
             try:
                 res = segment_lines(np.asarray(win_tracks, dtype=np.float64), n_req,
                                     intrinsics=intrinsics, image_size=size,
                                     method=self.params['method'], seed=int(self.params['seed']),
-                                    init_labels=init, init_motions=motions)
+                                    init_labels=init, init_motions=motions, rescan=rescan)
             except (ValueError, NotImplementedError) as exc:
                 problems.append(f'solver: {exc}')
             except Exception as exc:  # noqa: B902 (a solver failure must not lose the frame)

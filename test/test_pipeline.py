@@ -24,6 +24,7 @@ import pytest
 from mlofc_ros.bodies import assign, BodyTracker, relabel
 from mlofc_ros.pipeline import FOCAL_SAMPLES, FrameResult, Pipeline, TIMING_KEYS
 from mlofc_ros.render import render_sequence
+from mlofc_ros.solver import segment_lines
 
 #: The accuracy goal on the two-box sequence once the window is full.
 GOAL_MISCLASSIFIED = 0.03
@@ -472,3 +473,24 @@ def test_labels_are_stable_over_time():
         last = now
     assert total > 500
     assert changes / total < 0.01
+
+
+def test_general_rescans_one_body_per_frame_in_turn(monkeypatch):
+    # a body tracked in a wrong basin keeps it through the warm starts unless its fit is
+    # searched again now and then: the pipeline asks for one body per frame, in turn
+    import mlofc_ros.pipeline as pipeline_module
+    seq = small_sequence()
+    asked = []
+
+    def spy(*args, **kwargs):
+        asked.append(kwargs.get('rescan'))
+        return segment_lines(*args, **kwargs)
+    monkeypatch.setattr(pipeline_module, 'segment_lines', spy)
+    p = Pipeline(num_bodies=2, window=3, method='general')
+    for img, t in zip(seq.frames[:6], seq.stamps[:6]):
+        p.process(img, t, seq.camera)
+    warm = [r for r in asked if r is not None]
+    assert len(warm) >= 3 and warm == [[i % 2] for i in range(len(warm))]
+    asked.clear()
+    run(Pipeline(num_bodies=2, window=3), seq)                    # 'robust': nothing to rescan
+    assert asked and all(r is None for r in asked)

@@ -17,9 +17,9 @@ import pytest
 from scenes import random_scene
 
 from mlofc_ros.solver import segment_lines
-from mlofc_ros.solver.general import (_lm_runs, fit_body, fit_body_multistart, general_warm,
-                                      line_residuals, LineObservations, marginal_residuals,
-                                      necker_mirror)
+from mlofc_ros.solver.general import (_lm_runs, _pivot_translation, fit_body,
+                                      fit_body_multistart, general_warm, line_residuals,
+                                      LineObservations, marginal_residuals, necker_mirror)
 from mlofc_ros.solver.lines import rotation_matrix
 
 
@@ -180,3 +180,24 @@ def test_batched_evaluations_and_lockstep_fits_match_single_ones_bit_for_bit():
         for s in range(3):
             w, t, c = fit_body(obs, idx, W[s], T[s], 6, sigma2)
             assert np.array_equal(w, Wf[s]) and np.array_equal(t, Tf[s]) and c == cost[s]
+
+
+def test_rescan_lets_a_tracked_body_leave_a_wrong_basin():
+    # tracked from a wrong motion (another axis, a pivot twice as far), the warm start's few LM
+    # steps stay in its basin; the rescan (pivot starts at the measured noise) leaves it
+    for seed in (6, 11):
+        tracks, w = small_spinning_body(seed)
+        obs = LineObservations(tracks, (F, F, C, C))
+        ray = obs.rays.sum(axis=0) / np.linalg.norm(obs.rays.sum(axis=0))
+        w0 = np.cross(w, ray)
+        t0 = _pivot_translation(w0, 2.0 * ray)
+        err = {}
+        for rescan in (None, [0]):
+            res = segment_lines(tracks, 1, intrinsics=(F, F, C, C), method='general',
+                                init_labels=np.zeros(len(tracks), dtype=np.int64),
+                                init_motions=(w0[None], t0[None] / np.linalg.norm(t0)),
+                                rescan=rescan)
+            assert res.info['start'] == 'warm'
+            err[rescan is None] = (np.linalg.norm(res.angular_velocities[0] - w)
+                                   / np.linalg.norm(w))
+        assert err[True] > 0.5 and err[False] < 0.1
