@@ -19,7 +19,8 @@ from scenes import random_scene
 from mlofc_ros.solver import segment_lines
 from mlofc_ros.solver.general import (_lm_runs, _pivot_translation, fit_body,
                                       fit_body_multistart, general_warm, line_residuals,
-                                      LineObservations, marginal_residuals, necker_mirror)
+                                      LineObservations, marginal_residuals, necker_mirror,
+                                      position_costs)
 from mlofc_ros.solver.lines import rotation_matrix
 
 
@@ -201,3 +202,28 @@ def test_rescan_lets_a_tracked_body_leave_a_wrong_basin():
             err[rescan is None] = (np.linalg.norm(res.angular_velocities[0] - w)
                                    / np.linalg.norm(w))
         assert err[True] > 0.5 and err[False] < 0.1
+
+
+def test_position_costs_favour_compact_bodies():
+    # two compact objects with nearly the same motion: grouping them by motion alone may
+    # merge them and split another body; the position term makes that grouping pay
+    rng = np.random.default_rng(0)
+    blobs = [(100.0, 100.0), (900.0, 150.0), (500.0, 800.0)]
+    mid = np.concatenate([rng.normal(c, 40.0, (20, 2)) for c in blobs])
+    truth = np.repeat(np.arange(3), 20)
+    merged = np.where(truth == 2, 1, truth)               # objects 1 and 2 as one body ...
+    merged[np.arange(0, 20, 2)] = 2                       # ... and object 0 split in two
+    cost = position_costs(mid, truth, 3)
+    assert cost.shape == (60, 3)
+    assert np.all(np.argmin(cost, axis=1) == truth)
+
+    def total(lab):
+        return cost_of(position_costs(mid, lab, 3), lab)
+    assert total(truth) + 60.0 < total(merged)
+    # a body with no tracks falls back to the blob of all tracks (finite costs)
+    assert np.all(np.isfinite(position_costs(mid, np.zeros(60, dtype=np.int64), 3)))
+
+
+def cost_of(cost, lab):
+    """Sum of each track's cost under its label."""
+    return float(cost[np.arange(lab.size), lab].sum())

@@ -356,7 +356,8 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
     size = rot.info.get('image_size')
     cx, cy = rot.info['principal_point']
     obs = LineObservations(arr, (f, f * rot.info.get('aspect', 1.0), cx, cy))
-    neighbours = spatial_neighbours(first_midpoints(arr))
+    mid = first_midpoints(arr)
+    neighbours = spatial_neighbours(mid)
     sol = None
     if init_labels is not None and init_motions is not None:
         w0, t0 = init_motions
@@ -375,7 +376,8 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
         starts = [('rotation-only', rot.labels), ('spatial', spatial_labels(arr, n, rng))]
         if init_labels is not None:
             starts.insert(0, ('previous', np.asarray(init_labels)))
-        sol = general_search(obs, n, starts, rot.labels, rot.angular_velocities, neighbours)
+        sol = general_search(obs, n, starts, rot.labels, rot.angular_velocities, neighbours,
+                             points=mid)
     labels = sol['labels']
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
     # the labels need the inflated noise level (NOISE_FACTOR); the motions are refit on them at
