@@ -24,7 +24,7 @@ from .general import (body_covariance, fit_body_multistart, general_search, gene
                       spatial_labels, WARM_INLIERS)
 from .gpca import algebraic_normals
 from .ksubspaces import assign, ksubspaces, total_cost
-from .lines import (cayley_jacobian, cayley_to_rotvec, first_midpoints, line_flows, LineFlows,
+from .lines import (cayley_jacobian, cayley_to_rotvec, line_flows, LineFlows,
                     rotvec_to_cayley)
 from .models import fit_bodies, fit_stats, quad_costs, track_costs, track_stats
 from .result import SegmentationResult
@@ -356,8 +356,7 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
     size = rot.info.get('image_size')
     cx, cy = rot.info['principal_point']
     obs = LineObservations(arr, (f, f * rot.info.get('aspect', 1.0), cx, cy))
-    mid = first_midpoints(arr)
-    neighbours = spatial_neighbours(mid)
+    neighbours = spatial_neighbours(obs.midpoints)
     sol = None
     if init_labels is not None and init_motions is not None:
         w0, t0 = init_motions
@@ -373,11 +372,12 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
                                             rounds=2, iterations=4, neighbours=neighbours,
                                             keep=1, first_iterations=4, pivots=False)
     if sol is None:
-        starts = [('rotation-only', rot.labels), ('spatial', spatial_labels(arr, n, rng))]
+        starts = [('rotation-only', rot.labels),
+                  ('spatial', spatial_labels(obs.midpoints, n, rng))]
         if init_labels is not None:
             starts.insert(0, ('previous', np.asarray(init_labels)))
         sol = general_search(obs, n, starts, rot.labels, rot.angular_velocities, neighbours,
-                             points=mid)
+                             points=obs.midpoints)
     labels = sol['labels']
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
     # the labels need the inflated noise level (NOISE_FACTOR); the motions are refit on them at

@@ -50,8 +50,9 @@ class LineObservations:
 
     ``rows (N, K, 2, 3)``: for each frame the two directions ``e`` orthogonal to ``m_k``, scaled
     by the inverse standard deviation of ``m_k`` along them (1 px endpoint noise), so that
-    ``rows . n_k / |n_k|`` has unit variance; zero where the track is missing. ``rays (N, 3)``:
-    the unit viewing ray through the midpoint of every track's first segment (camera frame).
+    ``rows . n_k / |n_k|`` has unit variance; zero where the track is missing.
+    ``midpoints (N, 2)``: the midpoint of every track's first segment (px); ``rays (N, 3)``: the
+    unit viewing ray through it (camera frame).
     """
 
     def __init__(self, tracks: np.ndarray, intrinsics: Intrinsics) -> None:
@@ -71,7 +72,8 @@ class LineObservations:
         first = np.argmax(ok, axis=1)
         self.m_first = m[np.arange(m.shape[0]), first]
         self.frames = ok.sum(axis=1)
-        rays = normalise_points(first_midpoints(tracks), intrinsics)
+        self.midpoints = first_midpoints(tracks)
+        rays = normalise_points(self.midpoints, intrinsics)
         self.rays = rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
     @property
@@ -576,10 +578,9 @@ def general_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray,
     return out
 
 
-def spatial_labels(tracks: np.ndarray, n: int, rng: np.random.Generator,
+def spatial_labels(mid: np.ndarray, n: int, rng: np.random.Generator,
                    iterations: int = 10) -> np.ndarray:
-    """K-means of the track midpoints (px): lines near each other tend to share a body."""
-    mid = first_midpoints(tracks)
+    """K-means of the track midpoints ``mid (N, 2)`` (px): lines near each other share a body."""
     centres = mid[rng.choice(mid.shape[0], n, replace=False)]
     labels = np.zeros(mid.shape[0], dtype=np.int64)
     for _ in range(iterations):
