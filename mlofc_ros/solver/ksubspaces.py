@@ -121,11 +121,19 @@ def trim_bound(costs: np.ndarray, dof: np.ndarray, p: float = 0.9999,
     ``quantiles``: ``(chi2_quantile(0.5, dof), chi2_quantile(p, dof))`` when already computed.
     """
     ok = np.isfinite(costs).all(axis=1) & (dof > 0)
-    if not np.any(ok):
-        return np.full(costs.shape[0], np.inf)
     q50, qp = quantiles if quantiles is not None else (chi2_quantile(0.5, dof),
                                                        chi2_quantile(p, dof))
-    best = np.min(costs[ok], axis=1) / q50[ok]
+    if ok.all() and costs.shape[1]:
+        # the usual case, without the gathers; the minimum over the few bodies column by
+        # column (the same values as np.min along the short axis, faster)
+        best = costs[:, 0]
+        for b in range(1, costs.shape[1]):
+            best = np.minimum(best, costs[:, b])
+        best = best / q50
+    elif ok.any():
+        best = np.min(costs[ok], axis=1) / q50[ok]
+    else:
+        return np.full(costs.shape[0], np.inf)
     return qp * max(median(best), floor)
 
 

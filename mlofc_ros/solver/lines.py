@@ -288,29 +288,96 @@ class LineFlows:
 
     ``P`` pairs; each gives two equations ``r = M c - b`` for its body's Cayley vector ``c``.
     ``cov0``/``cov1`` are the normal covariances for 1 px endpoint noise.
+
+    The per-pair arrays ``m0, m1, cov0, cov1, E, M, b`` are copied out of the slot-major
+    arrays :func:`line_flows` computes on first access only: the weighted solvers use
+    ``track_rows`` alone (the copies were ~15% of :func:`line_flows`).
     """
 
     n_tracks: int
     pair_track: np.ndarray   # (P,) int: track index of each pair
-    m0: np.ndarray           # (P, 3) normal in the earlier frame
-    m1: np.ndarray           # (P, 3) normal in the later frame
-    cov0: np.ndarray         # (P, 3, 3)
-    cov1: np.ndarray         # (P, 3, 3)
-    E: np.ndarray            # (P, 3, 2) orthonormal pair orthogonal to m_bar
-    M: np.ndarray            # (P, 2, 3)
-    b: np.ndarray            # (P, 2)
     pair_slot: np.ndarray    # (P,) int: frame pair index within the window (k of k -> k+1)
     # (N, 2 (K-1), 4): every track's rows [M, -b] whitened per track (see :func:`whiten_tracks`)
     # by frame-pair slot, zero rows for missing pairs, so that a track's exact cost is
     # |rows @ [c ; 1]|^2 in one product
     track_rows: np.ndarray
+    # slot-major sources of the per-pair arrays (see the comment above _normals): normals
+    # (3, K, N), their covariances (3, 3, K, N), E (3, 2, S, N), unwhitened [M, -b]
+    # (S, 2, 4, N); and the pairs' indices track * S + slot (None: every slot of every track)
+    _m: np.ndarray = field(repr=False)
+    _cov: np.ndarray = field(repr=False)
+    _E: np.ndarray = field(repr=False)
+    _rows: np.ndarray = field(repr=False)
+    _flat: Optional[np.ndarray] = field(repr=False)
     # derived per-track quantities computed once (the arrays above are never modified):
-    # 'pairs' (N,) and the TrackStats of :func:`.models.track_stats` by weighting
+    # 'pairs' (N,), the TrackStats of :func:`.models.track_stats` by weighting, and the
+    # per-pair arrays
     cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n_pairs(self) -> int:
         return int(self.pair_track.shape[0])
+
+    @property
+    def m0(self) -> np.ndarray:
+        """``(P, 3)`` unit normal in the earlier frame of every pair."""
+        return self._frames()[0]
+
+    @property
+    def m1(self) -> np.ndarray:
+        """``(P, 3)`` unit normal in the later frame of every pair."""
+        return self._frames()[1]
+
+    @property
+    def cov0(self) -> np.ndarray:
+        """``(P, 3, 3)`` covariance of ``m0`` (1 px endpoint noise)."""
+        return self._frames()[2]
+
+    @property
+    def cov1(self) -> np.ndarray:
+        """``(P, 3, 3)`` covariance of ``m1`` (1 px endpoint noise)."""
+        return self._frames()[3]
+
+    @property
+    def E(self) -> np.ndarray:
+        """``(P, 3, 2)`` orthonormal pair orthogonal to ``m_bar``."""
+        out = self.cache.get('E')
+        if out is None:
+            out = self.cache['E'] = _by_pair(self._E, self._flat)
+        return out
+
+    @property
+    def M(self) -> np.ndarray:
+        """``(P, 2, 3)`` line-flow matrix of every pair."""
+        return self._pair_rows()[0]
+
+    @property
+    def b(self) -> np.ndarray:
+        """``(P, 2)`` line flow of every pair."""
+        return self._pair_rows()[1]
+
+    def _frames(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        out = self.cache.get('frames')
+        if out is None:
+            m, cov = _per_track(self._m), _per_track(self._cov)     # (N, K, 3), (N, K, 3, 3)
+            if self._flat is None:
+                m0, m1 = (np.ascontiguousarray(a).reshape(-1, 3) for a in (m[:, :-1], m[:, 1:]))
+                cov0, cov1 = (np.ascontiguousarray(a).reshape(-1, 3, 3)
+                              for a in (cov[:, :-1], cov[:, 1:]))
+            else:
+                frame = self._flat + self.pair_track                 # track * K + slot
+                m, cov = m.reshape(-1, 3), cov.reshape(-1, 3, 3)
+                m0, m1 = np.take(m, frame, axis=0), np.take(m, frame + 1, axis=0)
+                cov0, cov1 = np.take(cov, frame, axis=0), np.take(cov, frame + 1, axis=0)
+            out = self.cache['frames'] = (m0, m1, cov0, cov1)
+        return out
+
+    def _pair_rows(self) -> Tuple[np.ndarray, np.ndarray]:
+        out = self.cache.get('Mb')
+        if out is None:
+            rows = _by_pair(self._rows.transpose(1, 2, 0, 3), self._flat)
+            out = self.cache['Mb'] = (np.ascontiguousarray(rows[..., :3]), -rows[..., 3])
+        return out
 
     @property
     def rows(self) -> np.ndarray:
@@ -367,22 +434,10 @@ def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
     b += t[2]
     np.negative(b, out=zc[3])
     _blocks(E[:3], cov0, cov1, zc)
-    # the outputs by pair: one transposing copy per source array (the slow part), then copies
-    # of contiguous chunks or gathers
-    rows = _by_pair(z[:, :, :4].transpose(1, 2, 0, 3), flat)     # [M, -b] before _whiten
+    # the per-pair outputs are copied out on first use (LineFlows); _whiten overwrites z
+    rows = z[:, :, :4].copy()                                    # [M, -b] before _whiten
     track_rows = _whiten(z, pair_ok)
-    m, cov = _per_track(m), _per_track(cov)                      # (N, K, 3), (N, K, 3, 3)
-    if flat is None:
-        m0, m1 = (np.ascontiguousarray(a).reshape(-1, 3) for a in (m[:, :-1], m[:, 1:]))
-        cov0, cov1 = (np.ascontiguousarray(a).reshape(-1, 3, 3)
-                      for a in (cov[:, :-1], cov[:, 1:]))
-    else:
-        frame = flat + ti                                        # track * K + slot
-        m, cov = m.reshape(-1, 3), cov.reshape(-1, 3, 3)
-        m0, m1 = np.take(m, frame, axis=0), np.take(m, frame + 1, axis=0)
-        cov0, cov1 = np.take(cov, frame, axis=0), np.take(cov, frame + 1, axis=0)
-    return LineFlows(n_tracks, ti, m0, m1, cov0, cov1, _by_pair(E[:3], flat),
-                     np.ascontiguousarray(rows[..., :3]), -rows[..., 3], ki, track_rows)
+    return LineFlows(n_tracks, ti, ki, track_rows, m, cov, E[:3], rows, flat)
 
 
 def _by_pair(a: np.ndarray, flat: Optional[np.ndarray]) -> np.ndarray:
