@@ -108,10 +108,10 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               'values cut the mean cost per frame (the detector is most of a detection frame) '
               'but new edges get a track later.',
               range=(1, 100)),
-    ParamSpec('bridge_crossings', bool, False,
+    ParamSpec('bridge_crossings', bool, True,
               'Also find lines that other lines cross at short intervals (tiles, grids, '
-              'shelving), which the detector alone loses in pieces; about 6 ms more CPU per '
-              'detection frame at 640x480.'),
+              'shelving), which the detector alone loses in pieces; about 5-9 ms more CPU per '
+              'detection frame at 640x480 (false saves it).'),
     ParamSpec('min_track_frames', int, 2,
               'A track must be seen in at least this many frames of the window to be segmented '
               '(capped at `window`).',

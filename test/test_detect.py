@@ -161,8 +161,11 @@ def test_callable_backend():
     np.testing.assert_allclose(out, fixed[:1])
 
 
-def _hatched(seed, tilt_deg=7.0, cross_deg=38.0, stripe_px=3.0, period_px=10.0, size=160):
+def _hatched(seed, tilt_deg=7.0, cross_deg=38.0, stripe_px=3.0, period_px=10.0, size=160,
+             stripes_from=-np.inf):
     """Cross-hatched face: a band 40 px wide, tilted, crossed by thin dark stripes.
+
+    Stripes only right of column ``stripes_from`` px (default: everywhere on the face).
 
     Returns ``(image (size, size) uint8, band edge offsets (2,) px, unit normal (2,))``: the
     band's two edges are the lines ``(p - c) . normal = offset`` with ``c`` the image centre.
@@ -178,7 +181,8 @@ def _hatched(seed, tilt_deg=7.0, cross_deg=38.0, stripe_px=3.0, period_px=10.0, 
     across = (x - cx) * normal[0] + (y - cx) * normal[1]
     band = np.abs(across) <= 20.0
     a = t + np.deg2rad(90.0 - cross_deg)
-    stripe = np.mod((x - cx) * np.cos(a) + (y - cx) * np.sin(a), period_px) < stripe_px
+    stripe = (np.mod((x - cx) * np.cos(a) + (y - cx) * np.sin(a), period_px) < stripe_px) \
+        & (x >= stripes_from)
     face = (np.abs(x - cx) <= 60) & (np.abs(y - cx) <= 60)
     mult = np.where(stripe & band, 0.12, np.where(stripe, 0.3, np.where(band, 0.6, 1.0)))
     img = cv2.resize(np.where(face, 150.0 * mult, 70.0).astype(np.float32), (size, size),
@@ -201,7 +205,7 @@ def test_bridge_keeps_a_cross_hatched_band_edge_whole(seed):
     centre = (img.shape[0] - 1) / 2.0
     # the stripes cross the band edges every ~16 px at 38 deg: LSD's support regions stop at
     # each crossing and are too small to report, so neither edge comes out of plain LSD
-    plain = LineDetector().detect(img)
+    plain = LineDetector(bridge=False).detect(img)
     assert all(_longest_on(plain, o, normal, centre) == 0.0 for o in offsets)
     seg = LineDetector(bridge=True).detect(img)
     for o in offsets:
@@ -212,6 +216,26 @@ def test_bridge_keeps_a_cross_hatched_band_edge_whole(seed):
     assert _on_line(seg, stripes.astype(np.float64), dist_px=0.5).all()
 
 
+@pytest.mark.parametrize('seed', [0, 1])
+def test_bridge_leaves_reported_segments_as_they_are(seed):
+    # stripes right of x = 100 only: LSD reports the lower band edge's clean left part, the
+    # bridge finds its crossed right part
+    img, offsets, normal = _hatched(seed, stripes_from=100.0)
+    centre = (img.shape[0] - 1) / 2.0
+    o = offsets[1]
+    plain = LineDetector(bridge=False).detect(img)
+    assert 40.0 < _longest_on(plain, o, normal, centre) < 70.0
+    joined = LineDetector(bridge_join=True).detect(img)
+    assert _longest_on(joined, o, normal, centre) > 110.0
+    # default: a line that continues a reported segment is not added and the segment is kept
+    # as reported (its extent is the tracker's business: growth, later detections)
+    det = LineDetector()
+    assert det.bridge and not det.bridge_join
+    seg = det.detect(img)
+    assert _longest_on(seg, o, normal, centre) == _longest_on(plain, o, normal, centre)
+    np.testing.assert_array_equal(seg[:plain.shape[0]], plain)
+
+
 def test_bridge_adds_nothing_without_crossings():
     # one stripe direction only (no crossings): the bridged detector changes nothing
     img = np.full((160, 160), 70, np.uint8)
@@ -220,5 +244,5 @@ def test_bridge_adds_nothing_without_crossings():
     noisy = img + np.random.default_rng(3).normal(0.0, 2.0, img.shape)
     img = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
     np.testing.assert_array_equal(LineDetector(bridge=True).detect(img),
-                                  LineDetector().detect(img))
+                                  LineDetector(bridge=False).detect(img))
     assert bridge_crossings(img, np.zeros((0, 4), np.float32)).shape == (0, 4)

@@ -343,10 +343,10 @@ def test_constructor_and_reconfigure_validate_like_the_node():
     r = p.process(seq.frames[7], seq.stamps[7], seq.camera)
     assert r.window_fill == 2 and p._tracker.detect_every == 5
     assert ids & set(r.track_ids.tolist())
-    assert not p._tracker.detector.bridge
+    assert p._tracker.detector.bridge                                  # the default
     tracker = p._tracker
-    p.reconfigure(bridge_crossings=True)                              # detection only
-    assert p._tracker is tracker and tracker.detector.bridge and p.window_fill == 2
+    p.reconfigure(bridge_crossings=False)                             # detection only
+    assert p._tracker is tracker and not tracker.detector.bridge and p.window_fill == 2
 
 
 def test_distorted_camera_is_undistorted_before_solving():

@@ -286,6 +286,10 @@ def detector_candidates() -> List[Tuple[str, Dict[str, object]]]:
         cands += [('FLD (contrib) 1.0', {'backend': 'fld', 'scale': 1.0}),
                   ('FLD (contrib) 0.5', {'backend': 'fld', 'scale': 0.5}),
                   ('EDLines (contrib) 1.0', {'backend': 'edlines', 'scale': 1.0})]
+    # the backends as they are; the tracker's default detector (LSD 1.0 + bridge) as a row
+    cands = [(name, dict(kw, bridge=False)) for name, kw in cands]
+    cands.insert(1, ('LSD scale 1.0 + bridge (tracker default)',
+                     {'backend': 'lsd', 'scale': 1.0, 'bridge': True}))
     return cands
 
 
@@ -482,9 +486,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--backend', default=None,
                     help='tracker detector backend (lsd, lsd_resize, fld, edlines)')
     ap.add_argument('--scale', type=float, default=None, help='tracker detector scale')
-    ap.add_argument('--bridge', action='store_true',
-                    help='tracker detector with LineDetector(bridge=True) (lines cut up by '
-                         'crossings)')
+    ap.add_argument('--bridge', choices=('on', 'off', 'join'), default=None,
+                    help='tracker detector LineDetector(bridge=...): lines cut up by crossings '
+                         'added (on, the default), not (off), or joined with the segments they '
+                         'continue (join: bridge_join=True)')
     ap.add_argument('--real-dir', default=REAL_DIR)
     ap.add_argument('--real-frames', type=int, default=80)
     ap.add_argument('--quick', action='store_true', help='10 frames, one seed (smoke run)')
@@ -534,8 +539,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         kw['detect_every'] = args.detect_every
     det_kw = {k: v for k, v in (('backend', args.backend), ('scale', args.scale))
               if v is not None}
-    if args.bridge:
-        det_kw['bridge'] = True
+    if args.bridge is not None:
+        det_kw['bridge'] = args.bridge != 'off'
+        det_kw['bridge_join'] = args.bridge == 'join'
     if det_kw:
         kw['detector'] = LineDetector(**det_kw)
 
@@ -599,7 +605,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
          'Tracker': f'LineTracker(detect_every={tracker.detect_every}, '
                     f'min_length={tracker.min_length:g}) with '
                     f'LineDetector(backend={det.backend!r}, scale={det.scale:g}, '
-                    f'bridge={det.bridge})',
+                    f'bridge={det.bridge}, bridge_join={det.bridge_join})',
          'Run time': f'{seconds:.0f} s'})]
     lines += ['## Detectors on rendered frames', '',
               'Every 3rd frame of the rendered sequences below. A detection matches a GT edge '

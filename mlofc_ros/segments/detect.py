@@ -388,6 +388,42 @@ def bridge_crossings(gray: np.ndarray, segments: np.ndarray, min_length: float =
                     axis=1).astype(np.float32)
 
 
+def _rows_not_in(seg: np.ndarray, base: np.ndarray, tol: float = 1e-3) -> np.ndarray:
+    """Mask (M,) of the segments ``seg`` (M, 4) px that are no row of ``base`` (B, 4) px.
+
+    Rows count as equal within ``tol`` px per coordinate (merging passes a segment without
+    partners through unchanged, up to its float32 conversion).
+    """
+    if base.shape[0] == 0 or seg.shape[0] == 0:
+        return np.ones(seg.shape[0], bool)
+    same = np.abs(seg[:, None, :] - base[None, :, :]).max(axis=2) <= tol       # (M, B)
+    return ~same.any(axis=1)
+
+
+def _covers_any(seg: np.ndarray, base: np.ndarray, angle_deg: float = 2.0,
+                offset_px: float = 2.0) -> np.ndarray:
+    """Mask (M,) of segments ``seg`` (M, 4) px on which the centre of a ``base`` (B, 4) lies.
+
+    A base segment's centre lies on a segment when it is within ``offset_px`` of the segment's
+    line, projects inside its extent, and the two directions differ by at most ``angle_deg``.
+    """
+    if base.shape[0] == 0 or seg.shape[0] == 0:
+        return np.zeros(seg.shape[0], bool)
+    s = seg.astype(np.float64)
+    b = base.astype(np.float64)
+    d = s[:, 2:] - s[:, :2]
+    length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+    u = d / length[:, None]                                                     # (M, 2)
+    bd = b[:, 2:] - b[:, :2]
+    bu = bd / np.maximum(np.hypot(bd[:, 0], bd[:, 1]), 1e-9)[:, None]          # (B, 2)
+    r = 0.5 * (b[None, :, :2] + b[None, :, 2:]) - s[:, None, :2]                # (M, B, 2)
+    t = r[..., 0] * u[:, 0:1] + r[..., 1] * u[:, 1:2]
+    off = np.abs(r[..., 0] * u[:, 1:2] - r[..., 1] * u[:, 0:1])
+    hit = ((np.abs(u @ bu.T) >= np.cos(np.deg2rad(angle_deg))) & (off <= offset_px)
+           & (t >= 0.0) & (t <= length[:, None]))
+    return hit.any(axis=1)
+
+
 class LineDetector:
     """Line segment detector with a choice of backend, collinear merging and a length floor.
 
@@ -404,22 +440,27 @@ class LineDetector:
 
     ``bridge``: add the lines that :func:`bridge_crossings` finds where the backend's segments
     cross them (gaps up to ``bridge_gap_px``; the segments of at least ``min_length`` px are the
-    crossings), merged with those segments (short fragments are then dropped before the merge).
-    On the rendered seeds 0-3 (every 3rd frame) it lifted the detector's recall of stripe edges
-    on faces striped in two directions from 0.904 to 0.945 and of box edges from 0.930 to
-    0.966 (precision 0.991 -> 0.990) for ~6 ms more CPU per 640x480 frame (LSD at full
-    resolution: ~30 ms); the real sequences gain 0-2 segments per frame. Off by default: in the
-    tracker (``bench frontend --bridge``) tracked-5 rises on camera_centre s3 0.894 -> 0.946
-    and on 7 more of the 12 rendered sequences (seeds 0-5), but falls on own_centre s5
-    0.946 -> 0.938 and s0 0.933 -> 0.929, and own_centre id switches rise by ~0.1 percentage
-    point (s4 0.77 -> 0.98 %): more edges are tracked, and re-acquired, while faces turn
-    edge-on.
+    crossings; short fragments are dropped first). ~5-9 ms more CPU per 640x480 detection frame
+    (LSD at full resolution: ~27-35 ms); the real sequences gain 0-7 segments per frame.
+    ``bridge_join``: the bridged lines are merged with the reported segments they continue
+    (beyond a crossing), which lifted the detector's recall on the rendered seeds 0-3 (every
+    3rd frame) of stripe edges on faces striped in two directions from 0.904 to 0.945 and of
+    box edges from 0.930 to 0.966 (precision 0.991 -> 0.990). Off (the default), a bridged
+    line is added only where no reported segment's centre lies on it (after the merge), so
+    only the lines the backend missed altogether are added and reported ones keep their
+    extent: in the tracker the joined extents, longer by the bridged pieces beyond a
+    crossing, cost own_centre id switches (tracked-5 / switches, rendered seeds 0-5 with
+    joining vs without: own_centre s4 0.909 / 0.98 % vs 0.909 / 0.87 %, s5 0.938 / 0.59 % vs
+    0.943 / 0.43 %), while the missed lines are what camera_centre s3 needs (0.946 vs 0.947;
+    no bridge: 0.894). On by default since the tracker meets the issue #3 goal on 11 of the 12
+    rendered sequences with it, 10 without (see ``docs/design.md``).
     """
 
     def __init__(self, min_length: float = 20.0, scale: float = 1.0, backend: Backend = 'lsd',
                  merge: bool = True, merge_angle_deg: float = 2.0, merge_offset_px: float = 2.0,
                  merge_gap_px: float = 15.0, merge_oriented: bool = False, orient: bool = True,
-                 refine: bool = True, bridge: bool = False, bridge_gap_px: float = 12.0) -> None:
+                 refine: bool = True, bridge: bool = True, bridge_gap_px: float = 12.0,
+                 bridge_join: bool = False) -> None:
         if not min_length >= 0:
             raise ValueError(f'min_length must be >= 0, got {min_length}')
         if not 0.0 < scale <= 1.0:
@@ -440,6 +481,7 @@ class LineDetector:
         if not bridge_gap_px > 3.0:
             raise ValueError(f'bridge_gap_px must be > 3, got {bridge_gap_px}')
         self.bridge_gap_px = float(bridge_gap_px)
+        self.bridge_join = bool(bridge_join)
         self._impl = self._make_backend(backend, refine)
 
     def _make_backend(self, backend: Backend,
@@ -517,11 +559,19 @@ class LineDetector:
             if extra.shape[0] > 0:
                 if self.orient:
                     extra = orient_by_polarity(gray, extra)
-                seg = np.concatenate([seg, extra.astype(seg.dtype)])
+                both = np.concatenate([seg, extra.astype(seg.dtype)])
                 # an added line may continue a reported one beyond a crossing: join them
                 if self.merge:
-                    seg = merge_collinear(seg, self.merge_angle_deg, self.merge_offset_px,
-                                          self.merge_gap_px, oriented=self.merge_oriented)
+                    both = merge_collinear(both, self.merge_angle_deg, self.merge_offset_px,
+                                           self.merge_gap_px, oriented=self.merge_oriented)
                 # a bridged line's fitted extent may fall a hair short of its pixel span
-                seg = seg[segment_lengths(seg) >= self.min_length]
+                both = both[segment_lengths(both) >= self.min_length]
+                if self.bridge_join:
+                    seg = both
+                else:
+                    # only lines the backend missed altogether: a reported segment joined
+                    # with bridged pieces stays as reported (see the class docstring)
+                    new = _rows_not_in(both, seg)
+                    new[new] = ~_covers_any(both[new], seg)
+                    seg = np.concatenate([seg, both[new]])
         return np.ascontiguousarray(seg, dtype=np.float32)
