@@ -411,11 +411,9 @@ def _covers_any(seg: np.ndarray, base: np.ndarray, angle_deg: float = 2.0,
         return np.zeros(seg.shape[0], bool)
     s = seg.astype(np.float64)
     b = base.astype(np.float64)
-    d = s[:, 2:] - s[:, :2]
-    length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
-    u = d / length[:, None]                                                     # (M, 2)
-    bd = b[:, 2:] - b[:, :2]
-    bu = bd / np.maximum(np.hypot(bd[:, 0], bd[:, 1]), 1e-9)[:, None]          # (B, 2)
+    length = np.maximum(segment_lengths(s), 1e-9)
+    u = (s[:, 2:] - s[:, :2]) / length[:, None]                                 # (M, 2)
+    bu = (b[:, 2:] - b[:, :2]) / np.maximum(segment_lengths(b), 1e-9)[:, None]  # (B, 2)
     r = 0.5 * (b[None, :, :2] + b[None, :, 2:]) - s[:, None, :2]                # (M, B, 2)
     t = r[..., 0] * u[:, 0:1] + r[..., 1] * u[:, 1:2]
     off = np.abs(r[..., 0] * u[:, 1:2] - r[..., 1] * u[:, 0:1])

@@ -16,7 +16,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from .models import chi2_quantile, fit_stats, median, quad_costs, TrackStats
+from .models import chi2_quantile, fit_stats, median, quad_costs, row_min, TrackStats
 
 
 def assign(costs: np.ndarray, threshold: Optional[np.ndarray] = None) -> np.ndarray:
@@ -124,12 +124,7 @@ def trim_bound(costs: np.ndarray, dof: np.ndarray, p: float = 0.9999,
     q50, qp = quantiles if quantiles is not None else (chi2_quantile(0.5, dof),
                                                        chi2_quantile(p, dof))
     if ok.all() and costs.shape[1]:
-        # the usual case, without the gathers; the minimum over the few bodies column by
-        # column (the same values as np.min along the short axis, faster)
-        best = costs[:, 0]
-        for b in range(1, costs.shape[1]):
-            best = np.minimum(best, costs[:, b])
-        best = best / q50
+        best = row_min(costs) / q50                       # the usual case, without gathers
     elif ok.any():
         best = np.min(costs[ok], axis=1) / q50[ok]
     else:

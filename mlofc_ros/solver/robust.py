@@ -35,8 +35,8 @@ import numpy as np
 from .gpca import algebraic_normals
 from .ksubspaces import assign, ksubspaces, total_cost
 from .lines import first_midpoints, LineFlows
-from .models import (chi2_quantile, fit_bodies, median, quad_costs, solve_normal_equations,
-                     track_costs, track_stats, TrackStats)
+from .models import (chi2_quantile, fit_bodies, median, normal_ridge, quad_costs,
+                     solve_normal_equations, track_costs, track_stats, TrackStats)
 from .spatial import smooth_labels, spatial_neighbours
 
 #: A warm start is accepted alone when it leaves at least this share of the tracks as inliers
@@ -218,7 +218,7 @@ def free_residuals(stats: TrackStats, dof: np.ndarray) -> np.ndarray:
         # A written out: ~20 calls on (N,) arrays instead of one LAPACK solve per track
         a = stats.A[rows].reshape(-1, 9).T                   # a[3 i + j] = A_ij, (9, N)
         g = stats.g[rows].T                                  # (3, N)
-        ridge = 1e-9 * np.maximum((a[0] + a[4] + a[8]) / 3.0, 1e-300)
+        ridge = normal_ridge(a[0] + a[4] + a[8])
         d1 = a[0] + ridge
         l21, l31 = a[3] / d1, a[6] / d1
         d2 = a[4] + ridge - l21 * a[3]

@@ -24,7 +24,7 @@ from typing import Tuple
 
 import numpy as np
 
-from .models import median
+from .models import median, row_min
 
 #: Potts weight per disagreeing neighbour, as a share of the median inlier cost, at full
 #: coherence (measured on Hopkins155 line tracks: 0.25-1 gain 1-5 points, 2 starts to lose).
@@ -166,11 +166,7 @@ def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
     if n < 2 or neighbours.shape[1] == 0 or n_keep < 2:
         return lab, 0.0
     data = np.where(np.isfinite(costs), costs, np.inf)
-    # the best cost of every track as the minimum over the few bodies taken column by column
-    # (the same values as data.min(axis=1): no nan here; faster along a short axis)
-    best = data[:, 0]
-    for b in range(1, n):
-        best = np.minimum(best, data[:, b])
+    best = row_min(data)                                  # no nan here
     scale = median(best[keep])
     # every track's neighbours counted by label in one bincount: bin 0 = unlabelled (or a pad),
     # bin 1 + b = label b. The same integers as comparing every neighbour with every body, in
