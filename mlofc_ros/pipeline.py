@@ -186,17 +186,21 @@ class Pipeline:
 
     def _make_tracker(self) -> LineTracker:
         length = float(self.params['min_segment_length'])
-        return LineTracker(LineDetector(min_length=length,
-                                        bridge=bool(self.params['bridge_crossings'])),
-                           min_length=length, detect_every=int(self.params['detect_every']))
+        return LineTracker(self._make_detector(), min_length=length,
+                           detect_every=int(self.params['detect_every']))
+
+    def _make_detector(self) -> LineDetector:
+        return LineDetector(min_length=float(self.params['min_segment_length']),
+                            backend='lsd_resize', scale=float(self.params['detector_scale']),
+                            bridge=bool(self.params['bridge_crossings']))
 
     def reconfigure(self, **kwargs: Any) -> None:
         """Change parameters at run time; resets only what the change invalidates.
 
         ``window`` restarts the window; ``num_bodies`` restarts body numbering;
-        ``min_segment_length`` restarts the tracker and the window; ``detect_every`` and
-        ``bridge_crossings`` change only the detection (tracks carry on). Raises like the
-        constructor, changing nothing when any value is invalid.
+        ``min_segment_length`` restarts the tracker and the window; ``detect_every``,
+        ``detector_scale`` and ``bridge_crossings`` change only the detection (tracks carry
+        on). Raises like the constructor, changing nothing when any value is invalid.
         """
         unknown = sorted(set(kwargs) - set(_params.PARAMS))
         if unknown:
@@ -211,6 +215,8 @@ class Pipeline:
         else:
             # detection settings, not state: the tracks carry on
             self._tracker.detect_every = int(self.params['detect_every'])
+            if 'detector_scale' in changed:
+                self._tracker.detector = self._make_detector()
             self._tracker.detector.bridge = bool(self.params['bridge_crossings'])
         if 'window' in changed:
             self._window = TrackWindow(self.params['window'])

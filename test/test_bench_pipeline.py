@@ -31,6 +31,15 @@ def test_pipeline_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert png.is_file() and png.stat().st_size > 1000
 
 
+def test_pipeline_takes_node_parameters(tmp_path: pathlib.Path) -> None:
+    argv = ['--quick', '-p', 'detect_every:=4', '-p', 'detector_scale:=0.5', '--out',
+            str(tmp_path)]
+    assert pipeline.main(argv) == 0
+    assert '`detect_every:=4`, `detector_scale:=0.5`' in (tmp_path / 'pipeline.md').read_text()
+    with pytest.raises(SystemExit):
+        pipeline.main(['--quick', '-p', 'detector_scale:=2.0', '--out', str(tmp_path)])
+
+
 def test_read_visp_camera(tmp_path: pathlib.Path) -> None:
     xml = tmp_path / 'cube.xml'
     xml.write_text('<conf><camera>\n<u0>338.5</u0> <v0>234.5</v0>\n<px>547.7</px>'

@@ -317,7 +317,7 @@ def test_constructor_and_reconfigure_validate_like_the_node():
         Pipeline(window=1)
     p = Pipeline(window=4, focal_length=500, queue_size=3)            # int for a double: fine
     assert p.params['focal_length'] == 500.0
-    seq = small_sequence()
+    seq = small_sequence(9)
     for i in range(4):
         p.process(seq.frames[i], seq.stamps[i], seq.camera)
     assert p.window_fill == 4
@@ -347,6 +347,12 @@ def test_constructor_and_reconfigure_validate_like_the_node():
     tracker = p._tracker
     p.reconfigure(bridge_crossings=False)                             # detection only
     assert p._tracker is tracker and not tracker.detector.bridge and p.window_fill == 2
+    assert tracker.detector.scale == 0.8                               # the default
+    p.reconfigure(detector_scale=0.5)                                 # a new detector, same tracks
+    assert p._tracker is tracker and tracker.detector.scale == 0.5
+    assert not tracker.detector.bridge and tracker.detector.min_length == 30.0
+    r = p.process(seq.frames[8], seq.stamps[8], seq.camera)
+    assert r.window_fill == 3 and ids & set(r.track_ids.tolist())
 
 
 def test_distorted_camera_is_undistorted_before_solving():

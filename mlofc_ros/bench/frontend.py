@@ -280,16 +280,19 @@ def detector_candidates() -> List[Tuple[str, Dict[str, object]]]:
         ('LSD scale 1.0', {'backend': 'lsd', 'scale': 1.0}),
         ('LSD scale 0.8 (OpenCV default)', {'backend': 'lsd', 'scale': 0.8}),
         ('LSD scale 0.5', {'backend': 'lsd', 'scale': 0.5}),
+        ('resize 0.8 + LSD', {'backend': 'lsd_resize', 'scale': 0.8}),
         ('resize 0.5 + LSD', {'backend': 'lsd_resize', 'scale': 0.5}),
     ]
     if hasattr(cv2, 'ximgproc'):
         cands += [('FLD (contrib) 1.0', {'backend': 'fld', 'scale': 1.0}),
                   ('FLD (contrib) 0.5', {'backend': 'fld', 'scale': 0.5}),
                   ('EDLines (contrib) 1.0', {'backend': 'edlines', 'scale': 1.0})]
-    # the backends as they are; the tracker's default detector (LSD 1.0 + bridge) as a row
+    # the backends as they are; the tracker's default detector (resize 0.8 + LSD + bridge)
+    # and full-resolution LSD + bridge (the default until session 10) as rows
     cands = [(name, dict(kw, bridge=False)) for name, kw in cands]
-    cands.insert(1, ('LSD scale 1.0 + bridge (tracker default)',
-                     {'backend': 'lsd', 'scale': 1.0, 'bridge': True}))
+    cands.insert(1, ('LSD scale 1.0 + bridge', {'backend': 'lsd', 'scale': 1.0, 'bridge': True}))
+    cands.insert(4, ('resize 0.8 + LSD + bridge (tracker default)',
+                     {'backend': 'lsd_resize', 'scale': 0.8, 'bridge': True}))
     return cands
 
 
@@ -625,10 +628,14 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               'quality per detector call matters more than its speed: births of tracks need '
               'detections, and every missed birth is a missed edge for several frames. '
               'LSD at full resolution (`scale=1.0`) has the best recall and the lowest line '
-              'error of all candidates, at about 2x the cost of the OpenCV default; run on '
-              'every 3rd frame (the tracker default) its cost per frame is about two thirds '
-              'of the LSD default. LSD at scale '
-              '0.5 (or on a half-size image) is 2x cheaper than the default but misses '
+              'error of all candidates, at about 2x the cost of the OpenCV default. On the '
+              'image resized by 0.8 (area average, `lsd_resize`: the tracker default since '
+              'session 10) LSD detects fewer edges per call but it is cheaper, and in the '
+              'tracker, which refines and grows the lines it carries, it tracks as many edges '
+              'as LSD 1.0 (the tracking table below; render seeds 0-9 in the docstring of '
+              '`LineDetector`); the Gaussian sub-sampling of LSD itself at 0.8 tracks about 1 '
+              'point fewer. LSD at scale 0.5 (or on a half-size image) is 2x cheaper than '
+              'the default but misses '
               'a tenth of the edges and doubles the line error. The contrib detectors (FLD, '
               'EDLines) are 2-2.5x cheaper than the LSD default with recall between LSD 0.8 '
               'and LSD 0.5 and twice the line error of LSD 1.0; in the tracker (detection on '

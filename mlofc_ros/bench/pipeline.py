@@ -122,8 +122,11 @@ def image_message(img: np.ndarray, encoding: str) -> SimpleNamespace:
     return SimpleNamespace(**fields)
 
 
-def run_sequence(seq: Sequence_, method: Optional[str] = None) -> Dict[str, np.ndarray]:
+def run_sequence(seq: Sequence_, params: Optional[Dict[str, object]] = None
+                 ) -> Dict[str, np.ndarray]:
     """Time every stage on every frame of ``seq``; returns ms arrays per key (one per frame).
+
+    ``params``: :class:`Pipeline` parameters (node names) on top of the defaults.
 
     Keys: ``decode`` (mono8), ``decode_bgr8``, ``detect_track``, ``undistort``, ``window``,
     ``solve``, ``other`` (``total`` minus detect/track and solve), ``total`` (the whole
@@ -136,10 +139,7 @@ def run_sequence(seq: Sequence_, method: Optional[str] = None) -> Dict[str, np.n
     from mlofc_ros.messages import segment_cloud_fields
     from mlofc_ros.pipeline import Pipeline
 
-    kwargs = {'num_bodies': seq.num_bodies}
-    if method:
-        kwargs['method'] = method
-    pipe = Pipeline(**kwargs)
+    pipe = Pipeline(**dict(params or {}, num_bodies=seq.num_bodies))
     lsd = cv2.createLineSegmentDetector()
     rows: Dict[str, List[float]] = {k: [] for k in (
         'decode', 'decode_bgr8', 'detect_track', 'undistort', 'window', 'solve', 'other',
@@ -200,10 +200,20 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--real-dir', default=REAL_DIR, help='real sequences (*/frames/*.png)')
     ap.add_argument('--real-frames', type=int, default=80, help='max frames per real sequence')
     ap.add_argument('--method', default=None, help='solver method (default: the default)')
+    ap.add_argument('-p', '--param', action='append', default=[], metavar='NAME:=VALUE',
+                    help='pipeline parameter as the node takes it, e.g. -p detect_every:=4 '
+                         '(repeatable; default: the node defaults)')
     ap.add_argument('--quick', action='store_true',
                     help='smoke run: 7 frames of 320x240, no real sequence')
     ap.add_argument('--out', default=None, help='output folder (default docs/results)')
     args = ap.parse_args(list(argv))
+    from mlofc_ros.bag.offline import parse_params
+    try:
+        args.params = parse_params(args.param)
+    except ValueError as err:
+        ap.error(str(err))
+    if args.method:
+        args.params['method'] = args.method
     if args.quick:
         args.sizes, args.frames, args.real_frames = '320x240', 7, 0
     args.wh = []
@@ -260,6 +270,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
         {'Threads': 'single (`cv2.setNumThreads(1)`, one BLAS thread); the machine is shared, '
                     'so compare ratios to the LSD reference measured in the same run on the '
                     'same frames, not absolute ms across runs',
+         'Parameters': ', '.join(f'`{k}:={v}`' for k, v in args.params.items())
+                       or 'node defaults',
          'Code (at start)': args.code,
          'Wall time': f'{wall:.0f} s',
          'Load average (1 min) at start / end': f'{args.load:.1f} / {os.getloadavg()[0]:.1f}'})
@@ -360,7 +372,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     res = {}
     for s in seqs:
         common.eprint(f'pipeline: {s.name} ({len(s.frames)} frames)')
-        res[s.name] = run_sequence(s, args.method)
+        res[s.name] = run_sequence(s, args.params)
         r = res[s.name]
         common.eprint(f'  process median {_med(r["total"]):.1f} ms, LSD {_med(r["lsd"]):.1f} ms')
     report = build_report(args, argv, seqs, res, skip, time.monotonic() - t0)

@@ -354,8 +354,8 @@ class LineTracker:
 
     Parameters (pixels are input-image pixels):
 
-    * ``detector``: a :class:`LineDetector` (default: its defaults, LSD at full resolution,
-      with ``min_length``).
+    * ``detector``: a :class:`LineDetector` (default: its defaults, LSD on the image resized
+      by 0.8, with ``min_length``).
     * ``min_length``: shortest segment reported or born, px. Edges crossed by stripes (whose
       contrast flips along them) often come out of LSD in pieces shorter than 20 px only;
       10 (those pieces born, then grown, see ``grow_steps``) gave +1.2 / +2.4 / +0.4 points
