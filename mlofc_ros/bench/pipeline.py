@@ -202,7 +202,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--method', default=None, help='solver method (default: the default)')
     ap.add_argument('-p', '--param', action='append', default=[], metavar='NAME:=VALUE',
                     help='pipeline parameter as the node takes it, e.g. -p detect_every:=4 '
-                         '(repeatable; default: the node defaults)')
+                         '(repeatable; default: the node defaults; num_bodies comes from '
+                         'each sequence)')
     ap.add_argument('--quick', action='store_true',
                     help='smoke run: 7 frames of 320x240, no real sequence')
     ap.add_argument('--out', default=None, help='output folder (default docs/results)')

@@ -431,11 +431,11 @@ class LineDetector:
       ``scale`` (the LSD paper's anti-aliased scale; 0.8 is OpenCV's default).
     * ``'lsd_resize'`` (the default, at ``scale`` 0.8) -- ``cv2.resize`` (INTER_AREA) by
       ``scale``, then LSD at scale 1. The area average takes out most of the sensor noise,
-      in which LSD at full resolution spends much of its time, while keeping edges a few px
-      apart apart: on the rendered 640x480 sequences (render seeds 0-9, every 3rd frame in
+      in which LSD at full resolution spends much of its time, while edges a few px apart
+      stay apart: on the rendered 640x480 sequences (render seeds 0-9, every 3rd frame in
       the tracker) it tracks as many edges as full-resolution LSD (tracked-5 0.937 / 0.931
       on seeds 0-3 / 4-9 vs 0.937 / 0.932, id switches 0.53 / 0.52 % vs 0.52 / 0.51 %) for
-      about 28 % less front-end CPU per frame (mean), with line errors ~10 % larger (0.05-0.09
+      20-28 % less front-end CPU per frame (mean), with line errors ~10 % larger (0.05-0.09
       px). 0.9 and 0.7 were both worse (0.933 / 0.927 on seeds 0-3), 0.5 lost 2 points, and
       LSD's own Gaussian sub-sampling at 0.8 (``'lsd'``) lost 1 point.
     * ``'fld'`` / ``'edlines'`` -- ``cv2.ximgproc`` FastLineDetector / EdgeDrawing on the
