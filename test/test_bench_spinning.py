@@ -63,3 +63,9 @@ def test_score_run_counts_wrong_unassigned_and_omega_errors():
 def test_spinning_is_registered():
     assert 'spinning' in dispatcher.BENCHMARKS
     assert set(spinning.SCENES) >= {'own2+bg', 'own3+bg', 'own2', 'own3', 'cam2+bg'}
+
+
+def test_spinning_takes_node_parameters():
+    args = spinning.parse_args(['-p', 'detector_scale:=1.0', '-p', 'detect_every:=2'])
+    assert args.params == {'detector_scale': 1.0, 'detect_every': 2}
+    assert spinning.parse_args([]).params == {}

@@ -56,10 +56,15 @@ SCENES = {
 }
 
 
-def run_pipeline(seq, method: str, window: int) -> List[Tuple[object, float]]:
-    """``(FrameResult, CPU ms)`` of every frame of ``seq`` through a fresh pipeline."""
+def run_pipeline(seq, method: str, window: int, params: Optional[Dict[str, object]] = None
+                 ) -> List[Tuple[object, float]]:
+    """``(FrameResult, CPU ms)`` of every frame of ``seq`` through a fresh pipeline.
+
+    ``params``: other :class:`Pipeline` parameters (node names) on top of the defaults.
+    """
     from mlofc_ros.pipeline import Pipeline
-    pipe = Pipeline(num_bodies=len(seq.body_names), window=window, method=method)
+    pipe = Pipeline(**dict(params or {}, num_bodies=len(seq.body_names), window=window,
+                           method=method))
     out = []
     for gray, stamp in zip(seq.frames, seq.stamps):
         c = time.thread_time()
@@ -134,8 +139,18 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--windows', default='5', help='comma-separated window lengths (frames)')
     p.add_argument('--frames', type=int, default=30, help='frames per sequence (30 Hz)')
     p.add_argument('--seeds', default='0,1,2', help='comma-separated render seeds')
+    p.add_argument('-p', '--param', action='append', default=[], metavar='NAME:=VALUE',
+                   help='other pipeline parameter as the node takes it, e.g. -p '
+                        'detector_scale:=1.0 (repeatable; num_bodies, window and method come '
+                        'from the scene and the options above)')
     p.add_argument('--out', default=None, help='output folder (default docs/results)')
-    return p.parse_args(list(argv))
+    args = p.parse_args(list(argv))
+    from mlofc_ros.bag.offline import parse_params
+    try:
+        args.params = parse_params(args.param)
+    except ValueError as err:
+        p.error(str(err))
+    return args
 
 
 def _pct(x: float) -> float:
@@ -263,7 +278,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                   motion=motion, background=background, seed=seed)
             for method in methods:
                 for window in windows:
-                    outs = run_pipeline(seq, method, window)
+                    outs = run_pipeline(seq, method, window, args.params)
                     score = score_run(seq, outs, min(window - 1, args.frames - 1))
                     records.append({'scene': scene, 'seed': seed, 'method': method,
                                     'window': window, 'score': score})
