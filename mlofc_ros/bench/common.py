@@ -15,6 +15,7 @@
 
 Everything here is free of ROS; matplotlib is imported lazily (Agg backend) by the plot helpers.
 """
+import argparse
 import datetime
 import itertools
 import math
@@ -85,6 +86,26 @@ def git_revision(*paths: str) -> str:
         return 'unknown'
     rev = rev.strip() or 'unknown'
     return rev + ('+dirty' if dirty.strip() else '')
+
+
+def add_param_option(parser: argparse.ArgumentParser, fixed: str) -> None:
+    """Add ``-p NAME:=VALUE`` (repeatable): pipeline parameters as the node takes them.
+
+    ``fixed`` names the parameters the benchmark sets itself (they override ``-p``).
+    """
+    parser.add_argument('-p', '--param', action='append', default=[], metavar='NAME:=VALUE',
+                        help='pipeline parameter as the node takes it, e.g. -p '
+                             f'detector_scale:=1.0 (repeatable; {fixed} set by the benchmark)')
+
+
+def parse_param_option(parser: argparse.ArgumentParser, args: argparse.Namespace
+                       ) -> Dict[str, object]:
+    """Return the validated ``-p`` parameters of ``args``; a bad one is a usage error."""
+    from mlofc_ros.bag.offline import parse_params
+    try:
+        return parse_params(args.param)
+    except ValueError as err:
+        parser.error(str(err))                 # exits (status 2)
 
 
 def format_number(x: object, digits: int = 3) -> str:

@@ -200,19 +200,12 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--real-dir', default=REAL_DIR, help='real sequences (*/frames/*.png)')
     ap.add_argument('--real-frames', type=int, default=80, help='max frames per real sequence')
     ap.add_argument('--method', default=None, help='solver method (default: the default)')
-    ap.add_argument('-p', '--param', action='append', default=[], metavar='NAME:=VALUE',
-                    help='pipeline parameter as the node takes it, e.g. -p detect_every:=4 '
-                         '(repeatable; default: the node defaults; num_bodies comes from '
-                         'each sequence)')
+    common.add_param_option(ap, 'num_bodies is')
     ap.add_argument('--quick', action='store_true',
                     help='smoke run: 7 frames of 320x240, no real sequence')
     ap.add_argument('--out', default=None, help='output folder (default docs/results)')
     args = ap.parse_args(list(argv))
-    from mlofc_ros.bag.offline import parse_params
-    try:
-        args.params = parse_params(args.param)
-    except ValueError as err:
-        ap.error(str(err))
+    args.params = common.parse_param_option(ap, args)
     if args.method:
         args.params['method'] = args.method
     if args.quick:

@@ -139,17 +139,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--windows', default='5', help='comma-separated window lengths (frames)')
     p.add_argument('--frames', type=int, default=30, help='frames per sequence (30 Hz)')
     p.add_argument('--seeds', default='0,1,2', help='comma-separated render seeds')
-    p.add_argument('-p', '--param', action='append', default=[], metavar='NAME:=VALUE',
-                   help='other pipeline parameter as the node takes it, e.g. -p '
-                        'detector_scale:=1.0 (repeatable; num_bodies, window and method come '
-                        'from the scene and the options above)')
+    common.add_param_option(p, 'num_bodies, window and method are')
     p.add_argument('--out', default=None, help='output folder (default docs/results)')
     args = p.parse_args(list(argv))
-    from mlofc_ros.bag.offline import parse_params
-    try:
-        args.params = parse_params(args.param)
-    except ValueError as err:
-        p.error(str(err))
+    args.params = common.parse_param_option(p, args)
     return args
 
 
