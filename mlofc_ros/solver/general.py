@@ -265,22 +265,67 @@ def marginal_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t:
 
 
 def _costs2(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
-            sigma2: Optional[float], basis: Optional[np.ndarray] = None
-            ) -> Tuple[np.ndarray, np.ndarray]:
+            sigma2: Optional[float], basis: Optional[np.ndarray] = None,
+            logdet_out: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray]:
     """Costs ``(..., L)`` and moments after two passes (the v0-plane basis follows the moment).
 
     ``rows (L, K, 2, 3)``: the tracks' observation rows; ``w, t (..., 3)`` one motion or a
     batch; ``base (L, 3)`` or ``(..., L, 3)`` the first pass's moments, ``basis`` their
     :func:`.orthonormal_pair` if known. Both passes share the motion's constraints.
+    ``logdet_out``: a list that receives the second pass's log-determinant terms (marginalised).
     """
     An, Av = _design(rows, w, t)
     _, n0 = _evaluate(An, Av, base, sigma2, basis=basis)
-    return _evaluate(An, Av, n0, sigma2)
+    return _evaluate(An, Av, n0, sigma2, logdet_out=logdet_out)
 
 
 def _tangent(t: np.ndarray) -> np.ndarray:
     """Two unit vectors ``(2, 3)`` orthogonal to the unit vector ``t``."""
     return np.swapaxes(orthonormal_pair(t[None])[0], 0, 1)
+
+
+#: Scale of the robust per-line cost (:func:`_robust_costs`), in units of a line's median cost
+#: at the noise level: ``sigma2`` times the chi-square median of its ``2 K - 4`` degrees of
+#: freedom. Spinning benchmark (session 9 diagnosis, own3 seed 3, a box's true lines): a few
+#: tracks cost 20-50x the median under the true motion and make a wrong basin cheaper; with
+#: each line's cost bounded near 4x the median the true basin is cheaper.
+ROBUST_SCALE = 4.0
+
+
+def robust_scale(frames: np.ndarray, sigma2: float) -> np.ndarray:
+    """Per-line scale ``(L,)`` of the robust cost for tracks seen in ``frames (L,)``.
+
+    :data:`ROBUST_SCALE` times the median cost of a line at the noise variance ``sigma2``
+    (px^2): ``sigma2`` times the chi-square median with ``2 K - 4`` degrees of freedom.
+    """
+    from .models import chi2_quantile
+    dof = np.maximum(2.0 * np.asarray(frames, dtype=float) - 4.0, 1.0)
+    return ROBUST_SCALE * sigma2 * chi2_quantile(0.5, dof)
+
+
+def _robust_costs(res: np.ndarray, logdet: Optional[np.ndarray], scale: np.ndarray
+                  ) -> np.ndarray:
+    """Cauchy line costs ``s log(1 + q / s)`` (plus the log-determinant), same shape as ``res``.
+
+    ``res (..., L)``: line costs; ``logdet``: their log-determinant parts (marginalised
+    directions; None for fitted ones), which stay as they are: only the residual part ``q``
+    is robust. ``scale (L,)``: :func:`robust_scale`. A line at the median costs about 0.9 of
+    its plain cost, one at 50x the median about 10 medians instead of 50.
+    """
+    q = res if logdet is None else np.maximum(res - logdet, 0.0)
+    out = scale * np.log1p(q / scale)
+    return out if logdet is None else out + logdet
+
+
+def _totals(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
+            sigma2: Optional[float], scale: Optional[np.ndarray],
+            basis: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """:func:`_costs2` with the line costs made robust when ``scale`` is given."""
+    if scale is None:
+        return _costs2(rows, base, w, t, sigma2, basis)
+    parts: list = []
+    res, n0 = _costs2(rows, base, w, t, sigma2, basis, parts if sigma2 is not None else None)
+    return _robust_costs(res, parts[0] if parts else None, scale), n0
 
 
 #: LM step tries per lockstep round of the line search (8 in all, the damping x5 per try;
@@ -296,22 +341,23 @@ _BATCH = 50000
 
 
 def _scan_costs(rows: np.ndarray, base: np.ndarray, w: np.ndarray, T: np.ndarray,
-                sigma2: Optional[float]) -> list:
+                sigma2: Optional[float], scale: Optional[np.ndarray] = None) -> list:
     """Total two-pass cost of the tracks ``rows`` at each motion ``(w, T)``.
 
-    ``T (C, 3)``; ``w (3,)`` for all of them or ``(C, 3)``, one per candidate.
+    ``T (C, 3)``; ``w (3,)`` for all of them or ``(C, 3)``, one per candidate. ``scale``: the
+    robust per-line cost's (:func:`robust_scale`), None for least squares.
     """
     size = max(1, _BATCH // max(rows.shape[0] * rows.shape[1], 1))
     w = np.broadcast_to(w, T.shape)
     out: list = []
     for s in range(0, T.shape[0], size):                 # chunks of many candidates
-        res, _ = _costs2(rows, base, w[s:s + size], T[s:s + size], sigma2)
+        res, _ = _totals(rows, base, w[s:s + size], T[s:s + size], sigma2, scale)
         out += [r.sum() for r in res]                    # per candidate: a sum as in a loop
     return out
 
 
 def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndarray,
-             iterations: int, sigma2: Optional[float]
+             iterations: int, sigma2: Optional[float], robust: Optional[float] = None
              ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Independent :func:`fit_body` runs from ``(W0, T0) (S, 3)`` on the same tracks.
 
@@ -320,8 +366,15 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
     differences too): each call is dominated by its fixed overhead at these sizes (tens of
     tracks), so one batched call costs little more than a single evaluation. Each run takes
     exactly the steps it takes alone: the batched operations repeat its products per motion.
+
+    ``robust`` (px^2, a noise variance): minimise the robust cost of :func:`_robust_costs` at
+    :func:`robust_scale` of that variance instead of the sum of squares, by iteratively
+    reweighted Gauss-Newton (each line's residuals and Jacobian rows weighted by the Cauchy
+    weight ``s / (s + q)`` of its current cost ``q``); steps are accepted on the robust cost,
+    which is also the cost returned.
     """
     rows = obs.rows[idx]                                 # gathered once for all evaluations
+    scale = None if robust is None else robust_scale(obs.frames[idx], robust)
     free = sigma2 is not None
     n_run = W0.shape[0]
     W = np.array(W0, dtype=float)
@@ -330,7 +383,7 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
         for s in range(n_run):                           # a few runs, not lines
             nt = np.linalg.norm(T[s])
             T[s] = T[s] / nt if nt > 1e-12 else np.array([0.0, 0.0, 1.0])
-    res, n0 = _costs2(rows, obs.m_first[idx], W, T, sigma2)
+    res, n0 = _totals(rows, obs.m_first[idx], W, T, sigma2, scale)
     cost = [float(r.sum()) for r in res]
     lam, h = [1e-3] * n_run, 1e-6
     n_par = 6 if free else 5
@@ -358,6 +411,13 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
         basis = orthonormal_pair(n0a)                   # shared by probes and the next pass
         An, Av = _design(rows, Wp, Tp)
         r = _evaluate(An, Av, n0a[:, None], sigma2, n0a[:, None], basis[:, None])[0]
+        if scale is not None:
+            # IRLS: each line's residual rows (not the log-determinant) weighted by the root
+            # of its Cauchy weight at the current motion, the same for every probe
+            nq = r.shape[-1] - (1 if free else 0)
+            q = np.sum(r[:, 0, :, :nq] ** 2, axis=-1)                   # (A, L)
+            r = r.copy()
+            r[..., :nq] *= np.sqrt(scale / (scale + q))[:, None, :, None]
         r = r.reshape(active.size, probe.shape[0], -1)
         systems = []
         for a in range(active.size):                     # a few runs, not lines
@@ -380,7 +440,7 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
             pos = [a for a, _, _ in cand]
             cw = np.array([W[active[a]] + step[:3] for a, step, _ in cand])
             ct = np.array([moved(a, step) for a, step, _ in cand])
-            rn, n0n = _costs2(rows, n0a[pos], cw, ct, sigma2, basis[pos])
+            rn, n0n = _totals(rows, n0a[pos], cw, ct, sigma2, scale, basis[pos])
             for i, (a, step, lam_a) in enumerate(cand):  # each run's tries in order
                 s = active[a]
                 if a in accepted:
@@ -399,8 +459,8 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
 
 
 def fit_body(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, t0: np.ndarray,
-             iterations: int = 15, sigma2: Optional[float] = None
-             ) -> Tuple[np.ndarray, np.ndarray, float]:
+             iterations: int = 15, sigma2: Optional[float] = None,
+             robust: Optional[float] = None) -> Tuple[np.ndarray, np.ndarray, float]:
     """Levenberg-Marquardt on ``(w, T)`` for the tracks ``idx``; returns w, T, cost.
 
     Variable projection: the per-line unknowns are eliminated, the Jacobian is taken of every
@@ -409,10 +469,12 @@ def fit_body(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, t0: np.ndar
     :func:`line_residuals`) T is a unit vector that moves in its tangent plane (five
     parameters, no gauge freedom); with ``sigma2`` (px^2, marginalised directions,
     :func:`marginal_residuals`) T is free (six parameters, its length is the body's
-    translation scale).
+    translation scale). ``robust`` (px^2): the robust cost at that noise level
+    (:func:`_lm_runs`).
     """
     W, T, cost = _lm_runs(obs, idx, np.atleast_2d(np.asarray(w0, dtype=float)),
-                          np.atleast_2d(np.asarray(t0, dtype=float)), iterations, sigma2)
+                          np.atleast_2d(np.asarray(t0, dtype=float)), iterations, sigma2,
+                          robust)
     return W[0], T[0], float(cost[0])
 
 
@@ -467,8 +529,8 @@ def _pivot_translation(w: np.ndarray, c: np.ndarray) -> np.ndarray:
 def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
                         t0: Optional[np.ndarray] = None, iterations: int = 15,
                         keep: int = 3, sigma2: Optional[float] = None,
-                        ray: Optional[np.ndarray] = None, pivots: bool = True
-                        ) -> Tuple[np.ndarray, np.ndarray, float]:
+                        ray: Optional[np.ndarray] = None, pivots: bool = True,
+                        robust: Optional[float] = None) -> Tuple[np.ndarray, np.ndarray, float]:
     """Run :func:`fit_body` from the ``keep`` best starts of a scan at ``w0``.
 
     Fitted directions (``sigma2`` None): from ``t0``, or the best of :data:`T_STARTS` (the cost
@@ -476,9 +538,11 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
     (else :data:`T_STARTS`) at every scale of :data:`T_SCALES`, ``t0`` itself and T = 0.
     With ``ray`` (unit, camera frame: towards the body's lines), also from the
     :data:`PIVOT_KEEP` best of :func:`pivot_starts` (when ``pivots``), and the winner's
-    :func:`necker_mirror` is tried too. The cheapest run wins.
+    :func:`necker_mirror` is tried too. The cheapest run wins. ``robust`` (px^2): scans, fits
+    and comparisons on the robust cost at that noise level (:func:`_lm_runs`).
     """
     rows, base = obs.rows[idx], obs.m_first[idx]
+    scale = None if robust is None else robust_scale(obs.frames[idx], robust)
     if sigma2 is None and t0 is not None:
         starts = np.atleast_2d(t0)
     else:
@@ -493,17 +557,17 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
             cands = np.concatenate(extra + [(dirs[:, None, :] * T_SCALES[:, None]
                                              ).reshape(-1, 3)])
         scan = _scan_costs(rows, base, np.asarray(w0, dtype=float), cands,
-                           sigma2)                       # a few hundred starts, vectorised
+                           sigma2, scale)                # a few hundred starts, vectorised
         starts = cands[np.argsort(scan)[:keep]]
     w_starts = None
     if ray is not None and pivots:
         pw, pt = pivot_starts(np.asarray(ray, dtype=float))
-        best = np.argsort(_scan_costs(rows, base, pw, pt, sigma2))[:PIVOT_KEEP]
+        best = np.argsort(_scan_costs(rows, base, pw, pt, sigma2, scale))[:PIVOT_KEEP]
         w_starts = np.concatenate([np.broadcast_to(np.asarray(w0, dtype=float), starts.shape),
                                    pw[best]])
         starts = np.concatenate([starts, pt[best]])
-    fit = _best_fit(obs, idx, w0, starts, iterations, sigma2, w_starts)
-    return fit if ray is None else _necker_check(obs, idx, fit, ray, iterations, sigma2)
+    fit = _best_fit(obs, idx, w0, starts, iterations, sigma2, w_starts, robust)
+    return fit if ray is None else _necker_check(obs, idx, fit, ray, iterations, sigma2, robust)
 
 
 def necker_mirror(w: np.ndarray, ray: np.ndarray) -> np.ndarray:
@@ -519,32 +583,34 @@ def necker_mirror(w: np.ndarray, ray: np.ndarray) -> np.ndarray:
 
 def _necker_check(obs: LineObservations, idx: np.ndarray,
                   fit: Tuple[np.ndarray, np.ndarray, float], ray: np.ndarray, iterations: int,
-                  sigma2: Optional[float]) -> Tuple[np.ndarray, np.ndarray, float]:
+                  sigma2: Optional[float], robust: Optional[float] = None
+                  ) -> Tuple[np.ndarray, np.ndarray, float]:
     """Return ``fit`` or the LM run from its :func:`necker_mirror`, whichever is cheaper."""
     w = necker_mirror(fit[0], ray)
     t = _pivot_translation(w, ray)                       # the mirror turns about the pivot too
     if sigma2 is None:
         t = t * (np.linalg.norm(fit[1]) / max(np.linalg.norm(t), 1e-300))
-    W, T, cost = _lm_runs(obs, idx, w[None], t[None], iterations, sigma2)
+    W, T, cost = _lm_runs(obs, idx, w[None], t[None], iterations, sigma2, robust)
     return (W[0], T[0], float(cost[0])) if cost[0] < fit[2] else fit
 
 
 def polish_body(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
-                iterations: int, sigma2: float) -> Tuple[np.ndarray, np.ndarray, float]:
+                iterations: int, sigma2: float, robust: Optional[float] = None
+                ) -> Tuple[np.ndarray, np.ndarray, float]:
     """Refit a segmented body at the measured noise ``sigma2``: LM from ``(w, t)`` and its mirror.
 
     The segmentation's noise level is inflated (:data:`NOISE_FACTOR`), which flattens the cost
     in W; at the measured noise the depth-reversed motion (:func:`necker_mirror`) may fit
     better, so an LM run from it goes beside the one from ``(w, t)`` (and from T = 0, as in
-    every :func:`_best_fit`) and the cheapest wins.
+    every :func:`_best_fit`) and the cheapest wins. ``robust``: as in :func:`_lm_runs`.
     """
-    fit = _best_fit(obs, idx, w, np.atleast_2d(t), iterations, sigma2)
-    return _necker_check(obs, idx, fit, obs.body_ray(idx), iterations, sigma2)
+    fit = _best_fit(obs, idx, w, np.atleast_2d(t), iterations, sigma2, robust=robust)
+    return _necker_check(obs, idx, fit, obs.body_ray(idx), iterations, sigma2, robust)
 
 
 def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np.ndarray,
-              iterations: int, sigma2: Optional[float], w_starts: Optional[np.ndarray] = None
-              ) -> Tuple[np.ndarray, np.ndarray, float]:
+              iterations: int, sigma2: Optional[float], w_starts: Optional[np.ndarray] = None,
+              robust: Optional[float] = None) -> Tuple[np.ndarray, np.ndarray, float]:
     """Run :func:`fit_body` from ``w0`` and each T of ``starts (S, 3)``; the cheapest wins.
 
     ``w_starts (S, 3)``: a rotation per start instead of ``w0`` for all. With marginalised
@@ -556,7 +622,7 @@ def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np
     if sigma2 is not None and np.all(np.any(starts != 0.0, axis=1)):
         starts = np.concatenate([starts, np.zeros((1, 3))])
         W0 = np.concatenate([W0, w0[None]])
-    W, T, cost = _lm_runs(obs, idx, W0, starts, iterations, sigma2)   # all in lockstep
+    W, T, cost = _lm_runs(obs, idx, W0, starts, iterations, sigma2, robust)  # in lockstep
     best = 0
     for s in range(1, cost.size):                        # a few starts, not lines
         if cost[s] < cost[best]:
@@ -625,7 +691,8 @@ def _assign_within_bound(costs: np.ndarray, dof: np.ndarray, outlier_p: float
 def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
                    fitted: np.ndarray, iterations: int, w_start,
                    sigma2: Optional[float] = None, t_start=None, keep: int = 3,
-                   first_iterations: int = 15, pivots: bool = True) -> None:
+                   first_iterations: int = 15, pivots: bool = True,
+                   robust: Optional[float] = None) -> None:
     """Refit every body with >= 3 tracks in place: LM from its motion, or multi-start.
 
     ``fitted (n,)`` marks bodies whose ``(W, T)`` is a fit already (LM for ``iterations``);
@@ -633,17 +700,19 @@ def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: 
     :func:`pivot_starts` towards the body's lines when ``pivots`` and a Necker check
     (:func:`fit_body_multistart`), and become fitted (``keep`` LM runs of
     ``first_iterations``). ``sigma2``: marginalised directions (:func:`marginal_residuals`).
+    ``robust`` (px^2): robust line costs at that noise level (:func:`_lm_runs`).
     """
     for b in range(W.shape[0]):                               # bodies, not lines
         idx = np.flatnonzero(labels == b)
         if idx.size < 3:
             continue
         if fitted[b]:
-            W[b], T[b], _ = _best_fit(obs, idx, W[b], np.atleast_2d(T[b]), iterations, sigma2)
+            W[b], T[b], _ = _best_fit(obs, idx, W[b], np.atleast_2d(T[b]), iterations, sigma2,
+                                      robust=robust)
         else:
             W[b], T[b], _ = fit_body_multistart(
                 obs, idx, w_start(b), None if t_start is None else t_start(b),
-                first_iterations, keep, sigma2, obs.body_ray(idx), pivots)
+                first_iterations, keep, sigma2, obs.body_ray(idx), pivots, robust)
             fitted[b] = True
 
 
@@ -732,7 +801,8 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
                           outlier_p: float = 0.9999, neighbours: Optional[np.ndarray] = None,
                           keep: int = 3, first_iterations: int = 15,
                           pivots: bool = True, points: Optional[np.ndarray] = None,
-                          position_weight: float = POSITION_WEIGHT) -> dict:
+                          position_weight: float = POSITION_WEIGHT,
+                          robust: bool = False) -> dict:
     """Segment with the marginalised-direction model (:func:`marginal_residuals`).
 
     Parameters
@@ -759,6 +829,10 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         Track midpoints (px): each body also gets an image-position term
         (:func:`position_costs`, times ``position_weight * sigma2``) in the assignment and the
         score, so that the starts are compared on motion AND compactness.
+    robust : bool
+        Fit the bodies on robust line costs (:func:`_lm_runs`) at the noise level ``sigma2``
+        of the model (the inflated one: at the measured level, a body's direction prior and
+        the residuals of a wrong T = 0 are all scaled down and T = 0 wins on clean data).
 
     Returns
     -------
@@ -780,7 +854,8 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         total = costs
         for _ in range(rounds):
             _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b], sigma2,
-                           lambda b: T[b], keep, first_iterations, pivots)
+                           lambda b: T[b], keep, first_iterations, pivots,
+                           sigma2 if robust else None)
             costs, logdet = marginal_costs(obs, W, T, sigma2)
             total = costs
             if points is not None:
@@ -815,7 +890,7 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
                    w_rot: np.ndarray, neighbours: Optional[np.ndarray] = None,
                    noise_factor: float = NOISE_FACTOR, outlier_p: float = 0.9999,
                    points: Optional[np.ndarray] = None,
-                   position_weight: float = POSITION_WEIGHT) -> dict:
+                   position_weight: float = POSITION_WEIGHT, robust: bool = False) -> dict:
     """Full search of the 'general' method: noise level, then :func:`marginal_segmentation`.
 
     Parameters
@@ -835,6 +910,9 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
         Image neighbours for the spatial prior.
     points : (N, 2) float, optional
         Track midpoints (px) for the bodies' position term (:func:`position_costs`).
+    robust : bool
+        Fit the bodies of the segmentation on robust line costs (:func:`_lm_runs`) at its
+        (inflated) noise level.
 
     Returns the dict of :func:`marginal_segmentation`.
     """
@@ -842,10 +920,11 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
     W, T = np.array(w_rot, dtype=float), np.zeros((n, 3))
     lab = np.where(dof > 0, np.asarray(rot_labels, dtype=np.int64), -1)
     _fit_each_body(obs, lab, W, T, np.zeros(n, dtype=bool), 6, lambda b: w_rot[b])
-    sigma2 = noise_factor * _robust_sigma2(_best_costs(general_costs(obs, W, T)), dof)
-    return marginal_segmentation(obs, n, starts, W, T, sigma2, outlier_p=outlier_p,
-                                 neighbours=neighbours, points=points,
-                                 position_weight=position_weight)
+    measured = _robust_sigma2(_best_costs(general_costs(obs, W, T)), dof)
+    return marginal_segmentation(obs, n, starts, W, T, noise_factor * measured,
+                                 outlier_p=outlier_p, neighbours=neighbours, points=points,
+                                 position_weight=position_weight,
+                                 robust=robust)
 
 
 #: A warm start is kept when at least this share of the usable tracks stay inliers (else the
@@ -855,7 +934,7 @@ WARM_INLIERS = 0.5
 
 def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: np.ndarray,
                  known: np.ndarray, rounds: int = 3, iterations: int = 4,
-                 outlier_p: float = 0.9999) -> dict:
+                 outlier_p: float = 0.9999, robust: bool = False) -> dict:
     """Track the bodies of the previous window: a few LM steps from its motions, then assign.
 
     Parameters
@@ -871,6 +950,9 @@ def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: 
         multi-start search at ``W0`` (their rotation-only estimate).
     rounds, iterations : int
         Fit/assign rounds and LM iterations per body and round.
+    robust : bool
+        Fit on robust line costs (:func:`_lm_runs`) at the noise level of the current
+        assignment (in the first round, of the starting motions).
 
     Returns the dict of :func:`marginal_segmentation` (``start='warm'``, fitted directions, unit
     ``T``) plus ``inliers``, the
@@ -885,12 +967,16 @@ def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: 
     fitted = np.asarray(known, dtype=bool).copy()
     costs = np.full((obs.n_tracks, n), np.nan)
     sigma2, cap = 1.0, None
+    level = None
+    if robust:
+        level = _robust_sigma2(_best_costs(general_costs(obs, W, T)), dof)
     for _ in range(rounds):
-        _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b])
+        _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b], robust=level)
         costs = general_costs(obs, W, T)
         if not np.any(np.isfinite(costs)):
             break
         sigma2, cap, new = _assign_within_bound(costs, dof, outlier_p)
+        level = sigma2 if robust else None
         if np.array_equal(new, lab):
             break
         lab = new
