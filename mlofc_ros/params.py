@@ -30,7 +30,7 @@ Example::
 """
 from dataclasses import dataclass
 import math
-from typing import Any, Dict, Iterable, Mapping, Optional, Tuple, Union
+from typing import Any, Dict, Iterable, Mapping, Optional, Sequence, Tuple, Union
 
 Number = Union[int, float]
 
@@ -216,6 +216,31 @@ def check_all(values: Mapping[str, Any]) -> Dict[str, Any]:
     if problems:
         raise ValueError('; '.join(problems))
     return {k: PARAMS[k].type(v) for k, v in values.items()}
+
+
+def parse_param(item: str) -> Tuple[str, Any]:
+    """Parse ``name:=value`` as ``ros2 run ... -p`` does (YAML scalars: true, 3, 2.5, text)."""
+    name, sep, text = item.partition(':=')
+    if not sep or not name:
+        raise ValueError(f'parameter {item!r} is not of the form name:=value')
+    low = text.strip().lower()
+    value: Any
+    if low in ('true', 'false'):
+        value = low == 'true'
+    else:
+        try:
+            value = int(text)
+        except ValueError:
+            try:
+                value = float(text)
+            except ValueError:
+                value = text.strip().strip('\'"')
+    return name, value
+
+
+def parse_params(items: Sequence[str]) -> Dict[str, Any]:
+    """Parse and validate ``-p`` items (:func:`parse_param`); ``ValueError`` lists all."""
+    return check_all(dict(parse_param(i) for i in items))
 
 
 def names(scope: Optional[str] = None) -> Iterable[str]:

@@ -31,6 +31,7 @@ from mlofc_ros.bag.bagfile import (BagError, BagReader, BagWriter, CAMERA_INFO_T
                                    DEFAULT_STORAGE, deserialize, IMAGE_TYPE, serialize,
                                    STORAGES)
 from mlofc_ros.camera import CameraModel
+from mlofc_ros.params import parse_param, parse_params  # noqa: F401 (re-exported)
 
 SEGMENTS_TYPE = 'sensor_msgs/msg/PointCloud2'
 TWIST_TYPE = 'geometry_msgs/msg/TwistWithCovarianceStamped'
@@ -41,32 +42,6 @@ def output_topics(node_name: str = 'mlofc') -> Dict[str, str]:
     base = '/' + node_name.strip('/')
     return {'segments': f'{base}/segments', 'body': f'{base}/body_{{i}}/twist',
             'debug_image': f'{base}/debug_image'}
-
-
-def parse_param(item: str) -> Tuple[str, Any]:
-    """Parse ``name:=value`` as ``ros2 run ... -p`` does (YAML scalars: true, 3, 2.5, text)."""
-    name, sep, text = item.partition(':=')
-    if not sep or not name:
-        raise ValueError(f'parameter {item!r} is not of the form name:=value')
-    low = text.strip().lower()
-    value: Any
-    if low in ('true', 'false'):
-        value = low == 'true'
-    else:
-        try:
-            value = int(text)
-        except ValueError:
-            try:
-                value = float(text)
-            except ValueError:
-                value = text.strip().strip('\'"')
-    return name, value
-
-
-def parse_params(items: Sequence[str]) -> Dict[str, Any]:
-    """Parse and validate ``-p`` items (:mod:`mlofc_ros.params`); ``ValueError`` lists all."""
-    values = dict(parse_param(i) for i in items)
-    return mlofc_params.check_all(values)
 
 
 class ProgressBar:

@@ -101,7 +101,7 @@ def add_param_option(parser: argparse.ArgumentParser, fixed: str) -> None:
 def parse_param_option(parser: argparse.ArgumentParser, args: argparse.Namespace
                        ) -> Dict[str, object]:
     """Return the validated ``-p`` parameters of ``args``; a bad one is a usage error."""
-    from mlofc_ros.bag.offline import parse_params
+    from mlofc_ros.params import parse_params
     try:
         return parse_params(args.param)
     except ValueError as err:
