@@ -47,25 +47,18 @@ POLISH_ITERATIONS = 10
 #: benchmark, 3 seeds: wrong % over own2+bg / own3+bg / own2 / own3, see the commit).
 RESCAN_MARGIN = 0.1
 
-#: Whether the 'general' body fits and their comparisons use the robust (Cauchy) line cost of
-#: :func:`.general._lm_runs` (warm fits and polish at the measured noise level, segmentation
-#: fits at its inflated one) instead of least squares: a few tracks that follow no rigid
-#: motion (an edge the tracker moved onto another one) otherwise choose the basin of a body's
-#: motion. Off: spinning benchmark, window 10, six seeds, mean wrong % own2+bg / own3+bg /
-#: own2 / own3 4.2 / 9.4 / 6.4 / 8.8 -> 7.8 / 11.9 / 2.7 / 1.5 with it (design.md, session
-#: 10), better without a background body and worse with one.
-GENERAL_ROBUST = False
-
 #: Whether the final refit of every 'general' body (:func:`.polish_body`) and the rescan's
 #: pivot search and comparison use the robust (Cauchy) line cost at the measured noise level,
-#: with the warm and segmentation fits left least squares (unless :data:`GENERAL_ROBUST`).
+#: with the warm and segmentation fits left least squares. (The cost in every fit as well,
+#: helper branch h33, was not adopted: 4.2 / 9.4 / 6.4 / 8.8 -> 7.8 / 11.9 / 2.7 / 1.5 on an
+#: earlier front end, better without a background body and worse with one; design.md.)
 #: Spinning benchmark, window 10, six seeds, mean wrong % own2+bg / own3+bg / own2 / own3
 #: 4.6 / 16.9 / 2.1 / 9.8 -> 4.0 / 13.3 / 1.6 / 5.3 (with :data:`RESCAN_MARGIN_ROBUST` 0;
 #: 3.1 / 17.4 / 1.7 / 7.8 with 0.1), cam2+bg 0.09 -> 0.10 (design.md, session 10, h34).
 GENERAL_ROBUST_POLISH = True
 
-#: :data:`RESCAN_MARGIN` when the rescan compares robust costs (:data:`GENERAL_ROBUST` or
-#: :data:`GENERAL_ROBUST_POLISH`): the pivot search's fit wins whenever it is cheaper (the
+#: :data:`RESCAN_MARGIN` when the rescan compares robust costs
+#: (:data:`GENERAL_ROBUST_POLISH`): the pivot search's fit wins whenever it is cheaper (the
 #: robust cost makes a wrong basin only about 10% dearer; a 10% margin kept own3+bg seed 4 in
 #: one, 32% wrong, 13% with none).
 RESCAN_MARGIN_ROBUST = 0.0
@@ -372,7 +365,7 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
     (:func:`.fit_body_multistart` at the measured noise), kept when cheaper by
     :data:`RESCAN_MARGIN` (:data:`RESCAN_MARGIN_ROBUST` on the robust cost). The final refit
     (:func:`.polish_body`) and the rescan use the robust line cost with
-    :data:`GENERAL_ROBUST_POLISH` (or :data:`GENERAL_ROBUST`).
+    :data:`GENERAL_ROBUST_POLISH`.
     """
     if arr.shape[1] < 3:
         rot.method = 'general'
@@ -390,29 +383,27 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
         if np.any(known):
             warm = general_warm(obs, init_labels, np.where(known[:, None], w0,
                                                            rot.angular_velocities),
-                                np.where(known[:, None], t0, 0.0), known,
-                                robust=GENERAL_ROBUST)
+                                np.where(known[:, None], t0, 0.0), known)
             if warm['inliers'] >= WARM_INLIERS:
                 # the warm fits (fitted directions) give the noise level and the starts
                 sol = marginal_segmentation(obs, n, [('warm', warm['labels'])], warm['W'],
                                             warm['T'], NOISE_FACTOR * warm['sigma2'],
                                             rounds=2, iterations=4, neighbours=neighbours,
-                                            keep=1, first_iterations=4, pivots=False,
-                                            robust=GENERAL_ROBUST)
+                                            keep=1, first_iterations=4, pivots=False)
     if sol is None:
         starts = [('rotation-only', rot.labels),
                   ('spatial', spatial_labels(obs.midpoints, n, rng))]
         if init_labels is not None:
             starts.insert(0, ('previous', np.asarray(init_labels)))
         sol = general_search(obs, n, starts, rot.labels, rot.angular_velocities, neighbours,
-                             points=obs.midpoints, robust=GENERAL_ROBUST)
+                             points=obs.midpoints)
     labels = sol['labels']
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
     # the labels need the inflated noise level (NOISE_FACTOR); the motions are refit on them at
     # the measured one, where the prior on the line directions biases them less (about 2% of
     # |w| at x8 on noise-free spinning bodies, 0.2% at x1)
     sigma2 = sol['sigma2'] / NOISE_FACTOR
-    robust = sigma2 if GENERAL_ROBUST or GENERAL_ROBUST_POLISH else None
+    robust = sigma2 if GENERAL_ROBUST_POLISH else None
     margin = RESCAN_MARGIN if robust is None else RESCAN_MARGIN_ROBUST
     for b in range(n):                                    # bodies, not lines
         idx = np.flatnonzero(labels == b)

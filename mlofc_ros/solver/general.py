@@ -691,8 +691,7 @@ def _assign_within_bound(costs: np.ndarray, dof: np.ndarray, outlier_p: float
 def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
                    fitted: np.ndarray, iterations: int, w_start,
                    sigma2: Optional[float] = None, t_start=None, keep: int = 3,
-                   first_iterations: int = 15, pivots: bool = True,
-                   robust: Optional[float] = None) -> None:
+                   first_iterations: int = 15, pivots: bool = True) -> None:
     """Refit every body with >= 3 tracks in place: LM from its motion, or multi-start.
 
     ``fitted (n,)`` marks bodies whose ``(W, T)`` is a fit already (LM for ``iterations``);
@@ -700,19 +699,17 @@ def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: 
     :func:`pivot_starts` towards the body's lines when ``pivots`` and a Necker check
     (:func:`fit_body_multistart`), and become fitted (``keep`` LM runs of
     ``first_iterations``). ``sigma2``: marginalised directions (:func:`marginal_residuals`).
-    ``robust`` (px^2): robust line costs at that noise level (:func:`_lm_runs`).
     """
     for b in range(W.shape[0]):                               # bodies, not lines
         idx = np.flatnonzero(labels == b)
         if idx.size < 3:
             continue
         if fitted[b]:
-            W[b], T[b], _ = _best_fit(obs, idx, W[b], np.atleast_2d(T[b]), iterations, sigma2,
-                                      robust=robust)
+            W[b], T[b], _ = _best_fit(obs, idx, W[b], np.atleast_2d(T[b]), iterations, sigma2)
         else:
             W[b], T[b], _ = fit_body_multistart(
                 obs, idx, w_start(b), None if t_start is None else t_start(b),
-                first_iterations, keep, sigma2, obs.body_ray(idx), pivots, robust)
+                first_iterations, keep, sigma2, obs.body_ray(idx), pivots)
             fitted[b] = True
 
 
@@ -801,8 +798,7 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
                           outlier_p: float = 0.9999, neighbours: Optional[np.ndarray] = None,
                           keep: int = 3, first_iterations: int = 15,
                           pivots: bool = True, points: Optional[np.ndarray] = None,
-                          position_weight: float = POSITION_WEIGHT,
-                          robust: bool = False) -> dict:
+                          position_weight: float = POSITION_WEIGHT) -> dict:
     """Segment with the marginalised-direction model (:func:`marginal_residuals`).
 
     Parameters
@@ -829,10 +825,6 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         Track midpoints (px): each body also gets an image-position term
         (:func:`position_costs`, times ``position_weight * sigma2``) in the assignment and the
         score, so that the starts are compared on motion AND compactness.
-    robust : bool
-        Fit the bodies on robust line costs (:func:`_lm_runs`) at the noise level ``sigma2``
-        of the model (the inflated one: at the measured level, a body's direction prior and
-        the residuals of a wrong T = 0 are all scaled down and T = 0 wins on clean data).
 
     Returns
     -------
@@ -854,8 +846,7 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         total = costs
         for _ in range(rounds):
             _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b], sigma2,
-                           lambda b: T[b], keep, first_iterations, pivots,
-                           sigma2 if robust else None)
+                           lambda b: T[b], keep, first_iterations, pivots)
             costs, logdet = marginal_costs(obs, W, T, sigma2)
             total = costs
             if points is not None:
@@ -890,7 +881,7 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
                    w_rot: np.ndarray, neighbours: Optional[np.ndarray] = None,
                    noise_factor: float = NOISE_FACTOR, outlier_p: float = 0.9999,
                    points: Optional[np.ndarray] = None,
-                   position_weight: float = POSITION_WEIGHT, robust: bool = False) -> dict:
+                   position_weight: float = POSITION_WEIGHT) -> dict:
     """Full search of the 'general' method: noise level, then :func:`marginal_segmentation`.
 
     Parameters
@@ -910,9 +901,6 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
         Image neighbours for the spatial prior.
     points : (N, 2) float, optional
         Track midpoints (px) for the bodies' position term (:func:`position_costs`).
-    robust : bool
-        Fit the bodies of the segmentation on robust line costs (:func:`_lm_runs`) at its
-        (inflated) noise level.
 
     Returns the dict of :func:`marginal_segmentation`.
     """
@@ -920,11 +908,10 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
     W, T = np.array(w_rot, dtype=float), np.zeros((n, 3))
     lab = np.where(dof > 0, np.asarray(rot_labels, dtype=np.int64), -1)
     _fit_each_body(obs, lab, W, T, np.zeros(n, dtype=bool), 6, lambda b: w_rot[b])
-    measured = _robust_sigma2(_best_costs(general_costs(obs, W, T)), dof)
-    return marginal_segmentation(obs, n, starts, W, T, noise_factor * measured,
-                                 outlier_p=outlier_p, neighbours=neighbours, points=points,
-                                 position_weight=position_weight,
-                                 robust=robust)
+    sigma2 = noise_factor * _robust_sigma2(_best_costs(general_costs(obs, W, T)), dof)
+    return marginal_segmentation(obs, n, starts, W, T, sigma2, outlier_p=outlier_p,
+                                 neighbours=neighbours, points=points,
+                                 position_weight=position_weight)
 
 
 #: A warm start is kept when at least this share of the usable tracks stay inliers (else the
@@ -934,7 +921,7 @@ WARM_INLIERS = 0.5
 
 def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: np.ndarray,
                  known: np.ndarray, rounds: int = 3, iterations: int = 4,
-                 outlier_p: float = 0.9999, robust: bool = False) -> dict:
+                 outlier_p: float = 0.9999) -> dict:
     """Track the bodies of the previous window: a few LM steps from its motions, then assign.
 
     Parameters
@@ -950,9 +937,6 @@ def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: 
         multi-start search at ``W0`` (their rotation-only estimate).
     rounds, iterations : int
         Fit/assign rounds and LM iterations per body and round.
-    robust : bool
-        Fit on robust line costs (:func:`_lm_runs`) at the noise level of the current
-        assignment (in the first round, of the starting motions).
 
     Returns the dict of :func:`marginal_segmentation` (``start='warm'``, fitted directions, unit
     ``T``) plus ``inliers``, the
@@ -967,16 +951,12 @@ def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: 
     fitted = np.asarray(known, dtype=bool).copy()
     costs = np.full((obs.n_tracks, n), np.nan)
     sigma2, cap = 1.0, None
-    level = None
-    if robust:
-        level = _robust_sigma2(_best_costs(general_costs(obs, W, T)), dof)
     for _ in range(rounds):
-        _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b], robust=level)
+        _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b])
         costs = general_costs(obs, W, T)
         if not np.any(np.isfinite(costs)):
             break
         sigma2, cap, new = _assign_within_bound(costs, dof, outlier_p)
-        level = sigma2 if robust else None
         if np.array_equal(new, lab):
             break
         lab = new
