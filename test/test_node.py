@@ -267,14 +267,15 @@ def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
     try:
         clouds = h.collect(PointCloud2, '/mlofc/segments')
         pub = h.node.create_publisher(Image, '/cam/image_raw', qos_profile_sensor_data)
+        # discovery reports the other process's endpoints one by one: wait for all of them
+        twists = [f'/mlofc/body_{i}/twist' for i in range(3)]
         assert h.wait(lambda: pub.get_subscription_count() == 1
-                      and h.node.count_publishers('/mlofc/segments') == 1, 30.0), \
+                      and h.node.count_publishers('/mlofc/segments') == 1
+                      and h.node.count_subscribers('/cam/camera_info') == 1
+                      and all(h.node.count_publishers(t) == 1 for t in twists), 30.0), \
             'node did not come up'
         topics = h.topics()
-        for i in range(3):
-            assert f'/mlofc/body_{i}/twist' in topics
         assert '/mlofc/body_3/twist' not in topics and '/image' not in topics
-        assert h.node.count_subscribers('/cam/camera_info') == 1
         # -p focal_length:=300 (an integer) was accepted for the double
         assert h.get_params('/mlofc', 'focal_length', 'num_bodies', 'window') == [300, 3, 3]
         seq = small_sequence()
