@@ -190,8 +190,9 @@ class Pipeline:
                            detect_every=int(self.params['detect_every']))
 
     def _make_detector(self) -> LineDetector:
+        backend = 'fld' if self.params['detector_backend'] == 'fld' else 'lsd_resize'
         return LineDetector(min_length=float(self.params['min_segment_length']),
-                            backend='lsd_resize', scale=float(self.params['detector_scale']),
+                            backend=backend, scale=float(self.params['detector_scale']),
                             bridge=bool(self.params['bridge_crossings']))
 
     def reconfigure(self, **kwargs: Any) -> None:
@@ -199,8 +200,9 @@ class Pipeline:
 
         ``window`` restarts the window; ``num_bodies`` restarts body numbering;
         ``min_segment_length`` restarts the tracker and the window; ``detect_every``,
-        ``detector_scale`` and ``bridge_crossings`` change only the detection (tracks carry
-        on). Raises like the constructor, changing nothing when any value is invalid.
+        ``detector_backend``, ``detector_scale`` and ``bridge_crossings`` change only the
+        detection (tracks carry on). Raises like the constructor, changing nothing when any
+        value is invalid.
         """
         unknown = sorted(set(kwargs) - set(_params.PARAMS))
         if unknown:
@@ -215,7 +217,7 @@ class Pipeline:
         else:
             # detection settings, not state: the tracks carry on
             self._tracker.detect_every = int(self.params['detect_every'])
-            if 'detector_scale' in changed:
+            if changed & {'detector_backend', 'detector_scale'}:
                 self._tracker.detector = self._make_detector()
             self._tracker.detector.bridge = bool(self.params['bridge_crossings'])
         if 'window' in changed:

@@ -246,3 +246,16 @@ def test_bridge_adds_nothing_without_crossings():
     np.testing.assert_array_equal(LineDetector(bridge=True).detect(img),
                                   LineDetector(bridge=False).detect(img))
     assert bridge_crossings(img, np.zeros((0, 4), np.float32)).shape == (0, 4)
+
+
+def test_bridge_reuses_its_buffers_with_the_same_result():
+    # the scratch dict only keeps whole-image buffers between calls: the lines found are the
+    # same as with fresh buffers, also when the image size changes between calls
+    scratch = {}
+    for seed, size in ((0, 200), (1, 200), (2, 160), (0, 200)):
+        img, _, _ = _hatched(seed, size=size)
+        seg = LineDetector(bridge=False).detect(img)
+        fresh = bridge_crossings(img, seg)
+        assert fresh.shape[0] >= 2
+        np.testing.assert_array_equal(bridge_crossings(img, seg, scratch=scratch), fresh)
+        assert scratch['gx'].shape == img.shape

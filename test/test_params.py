@@ -19,6 +19,7 @@ import math
 import pytest
 
 from mlofc_ros import params
+from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import METHODS
 
 REQUIRED = {'num_bodies': (int, 2), 'window': (int, 5), 'method': (str, 'robust'),
@@ -110,6 +111,16 @@ def test_markdown_table_lists_every_parameter():
     for spec in params.PARAMETERS:
         assert f'`{spec.name}`' in table
     assert '[2, 30]' in table and "'robust'" in table
+
+
+def test_fld_backend_needs_opencv_contrib():
+    assert params.validate('detector_backend', 'lsd') is None
+    assert 'one of lsd, fld' in params.validate('detector_backend', 'edlines')
+    reason = params.validate('detector_backend', 'fld')
+    if has_ximgproc():
+        assert reason is None
+    else:
+        assert 'opencv-contrib-python-headless' in reason
 
 
 def test_module_examples():

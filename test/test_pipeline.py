@@ -24,6 +24,7 @@ import pytest
 from mlofc_ros.bodies import assign, BodyTracker, relabel
 from mlofc_ros.pipeline import FOCAL_SAMPLES, FrameResult, Pipeline, TIMING_KEYS
 from mlofc_ros.render import render_sequence
+from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import segment_lines
 
 #: The accuracy goal on the two-box sequence once the window is full.
@@ -317,7 +318,7 @@ def test_constructor_and_reconfigure_validate_like_the_node():
         Pipeline(window=1)
     p = Pipeline(window=4, focal_length=500, queue_size=3)            # int for a double: fine
     assert p.params['focal_length'] == 500.0
-    seq = small_sequence(9)
+    seq = small_sequence(10)
     for i in range(4):
         p.process(seq.frames[i], seq.stamps[i], seq.camera)
     assert p.window_fill == 4
@@ -352,6 +353,16 @@ def test_constructor_and_reconfigure_validate_like_the_node():
     assert p._tracker is tracker and tracker.detector.scale == 0.5
     assert not tracker.detector.bridge and tracker.detector.min_length == 30.0
     r = p.process(seq.frames[8], seq.stamps[8], seq.camera)
+    assert r.window_fill == 3 and ids & set(r.track_ids.tolist())
+    assert tracker.detector.backend == 'lsd_resize'                    # the default
+    if not has_ximgproc():
+        with pytest.raises(ValueError, match='opencv-contrib'):
+            p.reconfigure(detector_backend='fld')
+        assert tracker.detector.backend == 'lsd_resize'                # nothing changed
+        return
+    p.reconfigure(detector_backend='fld', detector_scale=1.0)
+    assert p._tracker is tracker and tracker.detector.backend == 'fld'
+    r = p.process(seq.frames[9], seq.stamps[9], seq.camera)
     assert r.window_fill == 3 and ids & set(r.track_ids.tolist())
 
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from mlofc_ros.bench import common
 from mlofc_ros.bench.data import shared_data_dir
-from mlofc_ros.segments.detect import LineDetector
+from mlofc_ros.segments.detect import has_ximgproc, LineDetector
 from mlofc_ros.tracks.tracker import LineTracker
 
 #: Real sequences (no ground truth), see ``/work/shared/data/real/README.md``.
@@ -283,7 +283,7 @@ def detector_candidates() -> List[Tuple[str, Dict[str, object]]]:
         ('resize 0.8 + LSD', {'backend': 'lsd_resize', 'scale': 0.8}),
         ('resize 0.5 + LSD', {'backend': 'lsd_resize', 'scale': 0.5}),
     ]
-    if hasattr(cv2, 'ximgproc'):
+    if has_ximgproc():
         cands += [('FLD (contrib) 1.0', {'backend': 'fld', 'scale': 1.0}),
                   ('FLD (contrib) 0.5', {'backend': 'fld', 'scale': 0.5}),
                   ('EDLines (contrib) 1.0', {'backend': 'edlines', 'scale': 1.0})]
@@ -637,13 +637,17 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               'point fewer. LSD at scale 0.5 (or on a half-size image) is 2x cheaper than '
               'the default but misses '
               'a tenth of the edges and doubles the line error. The contrib detectors (FLD, '
-              'EDLines) are 2-2.5x cheaper than the LSD default with recall between LSD 0.8 '
-              'and LSD 0.5 and twice the line error of LSD 1.0; in the tracker (detection on '
-              'every 2nd frame, same total budget or less) they gave 4-5 points lower '
-              '`tracked 5` than LSD 1.0 every 4th frame (measured when that was the default), '
-              'so they do not win clearly enough to '
-              "add a dependency (`LineDetector(backend='edlines')` works when "
-              'opencv-contrib is installed).', '']
+              'EDLines) are 2.5-3x cheaper than the LSD default, with recall per call between '
+              'LSD 0.8 and LSD 0.5 and 2-3x the line error of LSD 1.0. In the tracker with '
+              '`bridge_crossings` (session 11), FLD at full resolution tracks about as many '
+              'edges as the default (`tracked 5` / id switches, render seeds 0-3: 0.930 / '
+              '0.52% vs 0.937 / 0.53%, `frontend_fld/`; seeds 4-9: 0.937 / 0.48% vs 0.931 / '
+              '0.52%) for about a third less front-end CPU per frame (mean), with ~30% larger '
+              'line errors, about twice the endpoint error, own_centre s0 at 1.29% id '
+              'switches and 10-15% fewer segments on two of the real sequences; the node '
+              'offers it as `detector_backend:=fld` (with `detector_scale:=1.0`; it needs '
+              'opencv-contrib-python-headless in place of opencv-python-headless). Without '
+              '`bridge_crossings` FLD and EDLines track 5 points fewer edges.', '']
     lines += ['## Tracking on rendered sequences (640x480, background + boxes)', '',
               '`tracked 5` = share of (GT edge >= 30 px, 5 consecutive frames in which it is '
               'visible) with one track id on the edge in all 5 frames. `id switch` = % of '

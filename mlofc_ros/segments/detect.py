@@ -39,6 +39,11 @@ BACKENDS = ('lsd', 'lsd_resize', 'fld', 'edlines')
 Backend = Union[str, Callable[[np.ndarray], np.ndarray]]
 
 
+def has_ximgproc() -> bool:
+    """Return True when this OpenCV has the contrib module ximgproc (backends fld, edlines)."""
+    return hasattr(cv2, 'ximgproc')
+
+
 def segment_lengths(segments: np.ndarray) -> np.ndarray:
     """Return the lengths (M,) in pixels of segments ``(M, 4)``."""
     s = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
@@ -244,10 +249,30 @@ def _group_luts() -> Tuple[np.ndarray, np.ndarray]:
     return fold, np.where(explained | (grp >= _GROUPS), 0, 255).astype(np.uint8)
 
 
+@lru_cache(maxsize=4)
+def _square(size: int) -> np.ndarray:
+    """Rectangular structuring element ``size`` x ``size`` (cached: built per call otherwise)."""
+    return cv2.getStructuringElement(cv2.MORPH_RECT, (size, size))
+
+
+class _Buffers:
+    """Whole-image arrays of one shape, kept in a caller's dict and reused between calls."""
+
+    def __init__(self, scratch: Optional[dict], shape: Tuple[int, int]) -> None:
+        self.store = scratch if scratch is not None else {}
+        self.shape = shape
+
+    def __call__(self, name: str, dtype: type) -> np.ndarray:
+        a = self.store.get(name)
+        if a is None or a.shape != self.shape or a.dtype != dtype:
+            a = self.store[name] = np.empty(self.shape, dtype)
+        return a
+
+
 def bridge_crossings(gray: np.ndarray, segments: np.ndarray, min_length: float = 20.0,
                      gap_px: float = 12.0, min_cross_deg: float = 30.0,
                      min_gradient: float = 4.0, min_votes: int = 20, min_density: float = 0.5,
-                     near_px: int = 8) -> np.ndarray:
+                     near_px: int = 8, scratch: Optional[dict] = None) -> np.ndarray:
     """Find lines whose edge pixels are interrupted where reported segments cross them.
 
     ``gray`` (H, W) uint8; ``segments`` (M, 4) px, the lines already found (e.g. LSD's). Returns
@@ -266,6 +291,12 @@ def bridge_crossings(gray: np.ndarray, segments: np.ndarray, min_length: float =
     gradient ridge is 2-3 px wide, so 0.5 is about a quarter of the length supported):
     lines LSD could find on its own are not this function's business, and gaps without a
     crossing are not bridged, which keeps chance alignments in clutter out.
+
+    ``scratch``: a dict the caller keeps between calls (e.g. one per detector), in which the
+    whole-image intermediates (~6 MB at 640x480) are kept and reused. Allocated afresh on every
+    call, their pages are faulted in anew each time (glibc returns large freed blocks to the
+    system): about 1400 page faults per call, about half of this function's CPU time in a loop
+    over 640x480 detection frames.
     """
     empty = np.zeros((0, 4), np.float32)
     seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
@@ -277,23 +308,30 @@ def bridge_crossings(gray: np.ndarray, segments: np.ndarray, min_length: float =
     sgrp = np.minimum((np.mod(np.arctan2(d[:, 0], -d[:, 1]), np.pi) * (_GROUPS / np.pi))
                       .astype(np.intp), _GROUPS - 1)
     pts = np.rint(seg.reshape(-1, 2, 2)).astype(np.int32)
-    label = np.zeros((h, w), np.uint8)
+    buf = _Buffers(scratch, (h, w))
+    label = buf('label', np.uint8)
+    label[...] = 0
     order = np.argsort(sgrp, kind='stable')
     bounds = np.searchsorted(sgrp[order], np.arange(_GROUPS + 1))
     for g in np.nonzero(np.diff(bounds))[0]:        # one call per direction group (<= 12)
         cv2.polylines(label, list(pts[order[bounds[g]:bounds[g + 1]]]), False, int(g) + 1, 3)
-    near = cv2.dilate(cv2.compare(label, 0, cv2.CMP_GT),
-                      cv2.getStructuringElement(cv2.MORPH_RECT, (2 * near_px - 1,) * 2))
-    gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, ksize=3)
-    mag = cv2.magnitude(gx, gy)
-    phase = cv2.phase(gx, gy)                                   # rad in [0, 2 pi)
+    near = cv2.dilate(cv2.compare(label, 0, cv2.CMP_GT, dst=buf('u8a', np.uint8)),
+                      _square(2 * near_px - 1), dst=buf('near', np.uint8))
+    gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0, dst=buf('gx', np.float32), ksize=3)
+    gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, dst=buf('gy', np.float32), ksize=3)
+    mag = cv2.magnitude(gx, gy, magnitude=buf('mag', np.float32))
+    phase = cv2.phase(gx, gy, angle=buf('phase', np.float32))   # rad in [0, 2 pi)
     # whole-image uint8 ops (cheap) rather than per-pixel numpy: group of every pixel, then
     # explained or not from its group and the label under it
     fold, resid = _group_luts()
-    grp = cv2.LUT(cv2.convertScaleAbs(phase, alpha=_GROUPS / np.pi, beta=-0.5), fold)
-    cand = cv2.LUT(cv2.scaleAdd(grp, float(_GROUPS + 1), label), resid)
-    cand = cv2.bitwise_and(cand, cv2.compare(mag, 8.0 * min_gradient, cv2.CMP_GE), mask=near)
+    u8a, u8b = buf('u8a', np.uint8), buf('u8b', np.uint8)
+    grp = cv2.LUT(cv2.convertScaleAbs(phase, dst=u8a, alpha=_GROUPS / np.pi, beta=-0.5), fold,
+                  dst=u8b)
+    cand = cv2.LUT(cv2.scaleAdd(grp, float(_GROUPS + 1), label, dst=u8a), resid, dst=u8b)
+    # near is 0 / 255, so a plain AND masks (a masked op would leave the reused dst unset)
+    cand = cv2.bitwise_and(cand, near, dst=u8b)
+    cand = cv2.bitwise_and(cand, cv2.compare(mag, 8.0 * min_gradient, cv2.CMP_GE, dst=u8a),
+                           dst=u8b)
     nz = cv2.findNonZero(cand)
     if nz is None or len(nz) < min_votes:
         return empty
@@ -439,15 +477,19 @@ class LineDetector:
       px). 0.9 and 0.7 were both worse (0.933 / 0.927 on seeds 0-3), 0.5 lost 2 points, and
       LSD's own Gaussian sub-sampling at 0.8 (``'lsd'``) lost 1 point.
     * ``'fld'`` / ``'edlines'`` -- ``cv2.ximgproc`` FastLineDetector / EdgeDrawing on the
-      image resized by ``scale`` (need opencv-contrib).
+      image resized by ``scale`` (need opencv-contrib). FLD at scale 1 with ``bridge``, in the
+      tracker: as many edges tracked as the default (tracked-5 / id switches, render seeds
+      0-3 / 4-9: 0.930 / 0.52 % and 0.937 / 0.48 % vs 0.937 / 0.53 % and 0.931 / 0.52 %),
+      a third less front-end CPU per frame (mean), line errors ~30 % and endpoint errors
+      40-110 % larger. Without ``bridge`` it misses 5 points of the edges.
     * a callable ``gray (H, W) uint8 -> (M, 4)`` segments px, used as is (``scale`` ignored).
 
     Segments shorter than ``min_length`` px (full-resolution pixels) are dropped after merging.
 
     ``bridge``: add the lines that :func:`bridge_crossings` finds where the backend's segments
     cross them (gaps up to ``bridge_gap_px``; the segments of at least ``min_length`` px are the
-    crossings; short fragments are dropped first). ~5-9 ms more CPU per 640x480 detection frame
-    (LSD at full resolution: ~27-35 ms); the real sequences gain 0-7 segments per frame.
+    crossings; short fragments are dropped first). ~4 ms more CPU per 640x480 detection frame
+    (LSD on the image resized by 0.8: ~15 ms); the real sequences gain 0-7 segments per frame.
     ``bridge_join``: the bridged lines are merged with the reported segments they continue
     (beyond a crossing), which lifted the detector's recall on the rendered seeds 0-3 (every
     3rd frame) of stripe edges on faces striped in two directions from 0.904 to 0.945 and of
@@ -489,6 +531,7 @@ class LineDetector:
             raise ValueError(f'bridge_gap_px must be > 3, got {bridge_gap_px}')
         self.bridge_gap_px = float(bridge_gap_px)
         self.bridge_join = bool(bridge_join)
+        self._scratch: dict = {}                 # bridge_crossings' reused image buffers
         self._impl = self._make_backend(backend, refine)
 
     def _make_backend(self, backend: Backend,
@@ -507,7 +550,7 @@ class LineDetector:
                 return None if out is None else out.reshape(-1, 4) + shift
             return run_lsd
         if backend in ('fld', 'edlines'):
-            if not hasattr(cv2, 'ximgproc'):
+            if not has_ximgproc():
                 raise ValueError(f'backend {backend!r} needs opencv-contrib (cv2.ximgproc)')
         if backend == 'lsd_resize':
             det = cv2.createLineSegmentDetector(ref, 1.0)
@@ -562,7 +605,8 @@ class LineDetector:
                                   self.merge_gap_px, oriented=self.merge_oriented)
         seg = seg[segment_lengths(seg) >= self.min_length]
         if self.bridge and seg.shape[0] > 0:
-            extra = bridge_crossings(gray, seg, self.min_length, self.bridge_gap_px)
+            extra = bridge_crossings(gray, seg, self.min_length, self.bridge_gap_px,
+                                     scratch=self._scratch)
             if extra.shape[0] > 0:
                 if self.orient:
                     extra = orient_by_polarity(gray, extra)
