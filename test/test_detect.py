@@ -16,8 +16,8 @@ import cv2
 import numpy as np
 import pytest
 
-from mlofc_ros.segments.detect import (bridge_crossings, LineDetector, merge_collinear,
-                                       orient_by_polarity)
+from mlofc_ros.segments.detect import (_rows_not_in, bridge_crossings, LineDetector,
+                                       merge_collinear, orient_by_polarity)
 
 
 def _on_line(seg, gt, angle_deg=3.0, dist_px=2.0):
@@ -259,3 +259,17 @@ def test_bridge_reuses_its_buffers_with_the_same_result():
         assert fresh.shape[0] >= 2
         np.testing.assert_array_equal(bridge_crossings(img, seg, scratch=scratch), fresh)
         assert scratch['gx'].shape == img.shape
+
+
+def test_rows_not_in_matches_the_dense_comparison():
+    # rows equal within the tolerance per coordinate, found by a sorted search on the first
+    # coordinate: the same answer as comparing every row with every row
+    rng = np.random.default_rng(5)
+    base = np.round(rng.random((150, 4)) * 50.0).astype(np.float32)   # many ties in u1
+    seg = np.concatenate([base[rng.permutation(150)[:60]],
+                          base[:40] + rng.choice([-2e-3, -5e-4, 5e-4, 2e-3], (40, 4)),
+                          np.round(rng.random((50, 4)) * 50.0)]).astype(np.float32)
+    dense = ~(np.abs(seg[:, None] - base[None]).max(axis=2) <= 1e-3).any(axis=1)
+    np.testing.assert_array_equal(_rows_not_in(seg, base), dense)
+    assert 0 < dense.sum() < seg.shape[0]
+    assert _rows_not_in(seg, base[:0]).all() and _rows_not_in(seg[:0], base).shape == (0,)

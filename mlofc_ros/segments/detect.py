@@ -434,8 +434,18 @@ def _rows_not_in(seg: np.ndarray, base: np.ndarray, tol: float = 1e-3) -> np.nda
     """
     if base.shape[0] == 0 or seg.shape[0] == 0:
         return np.ones(seg.shape[0], bool)
-    same = np.abs(seg[:, None, :] - base[None, :, :]).max(axis=2) <= tol       # (M, B)
-    return ~same.any(axis=1)
+    # candidates by the first coordinate only (sorted), then all four: the dense (M, B, 4)
+    # comparison cost ~0.8 ms per 640x480 detection frame, this ~0.05 ms
+    order = np.argsort(base[:, 0], kind='stable')
+    b0 = base[order, 0]
+    lo = np.searchsorted(b0, seg[:, 0] - tol, 'left')
+    cnt = np.searchsorted(b0, seg[:, 0] + tol, 'right') - lo
+    i = np.repeat(np.arange(seg.shape[0]), cnt)
+    k = lo[i] + np.arange(i.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    same = np.abs(seg[i] - base[order[k]]).max(axis=1) <= tol
+    out = np.ones(seg.shape[0], bool)
+    out[i[same]] = False
+    return out
 
 
 def _covers_any(seg: np.ndarray, base: np.ndarray, angle_deg: float = 2.0,
