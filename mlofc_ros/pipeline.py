@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import math
 import statistics
 import time
-from typing import Any, Deque, Dict, List, Optional, Tuple
+from typing import Any, Deque, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
@@ -147,6 +147,20 @@ def _lookup(keys: np.ndarray, table_keys: np.ndarray, table_values: np.ndarray,
     return out
 
 
+def make_detector(params: Mapping[str, Any]) -> LineDetector:
+    """Build the line detector the pipeline runs with ``params`` (node names, all set)."""
+    backend = 'fld' if params['detector_backend'] == 'fld' else 'lsd_resize'
+    return LineDetector(min_length=float(params['min_segment_length']), backend=backend,
+                        scale=float(params['detector_scale']),
+                        bridge=bool(params['bridge_crossings']))
+
+
+def make_tracker(params: Mapping[str, Any]) -> LineTracker:
+    """Build the line tracker (with :func:`make_detector`) the pipeline runs with ``params``."""
+    return LineTracker(make_detector(params), min_length=float(params['min_segment_length']),
+                       detect_every=int(params['detect_every']))
+
+
 class Pipeline:
     """Sliding-window motion segmentation of a gray image stream.
 
@@ -185,15 +199,10 @@ class Pipeline:
     # --- configuration -------------------------------------------------------------------
 
     def _make_tracker(self) -> LineTracker:
-        length = float(self.params['min_segment_length'])
-        return LineTracker(self._make_detector(), min_length=length,
-                           detect_every=int(self.params['detect_every']))
+        return make_tracker(self.params)
 
     def _make_detector(self) -> LineDetector:
-        backend = 'fld' if self.params['detector_backend'] == 'fld' else 'lsd_resize'
-        return LineDetector(min_length=float(self.params['min_segment_length']),
-                            backend=backend, scale=float(self.params['detector_scale']),
-                            bridge=bool(self.params['bridge_crossings']))
+        return make_detector(self.params)
 
     def reconfigure(self, **kwargs: Any) -> None:
         """Change parameters at run time; resets only what the change invalidates.

@@ -25,7 +25,25 @@ BENCHMARKS = {
     'ros': 'highest image rate the running node keeps up with, and its latency',
     'soak': 'resident memory over a long run of the pipeline (10,000 frames)',
     'spinning': 'boxes spinning about their own centres through the pipeline: robust vs general',
+    'tradeoff': 'speed vs tracking quality over detector_scale, detect_every, bridge_crossings',
 }
+
+
+def run_all() -> int:
+    """Run every benchmark with its defaults, in turn; returns the worst exit code.
+
+    One failing benchmark does not stop the others (each writes its own report).
+    """
+    worst = 0
+    for name in BENCHMARKS:
+        print(f'=== python -m mlofc_ros.bench {name}', file=sys.stderr, flush=True)
+        try:
+            code = int(importlib.import_module(f'mlofc_ros.bench.{name}').main([]) or 0)
+        except Exception as exc:  # noqa: B902 (report it and go on with the next one)
+            print(f'=== {name} failed: {type(exc).__name__}: {exc}', file=sys.stderr)
+            code = 1
+        worst = max(worst, code)
+    return worst
 
 
 def main(argv: Optional[List[str]] = None) -> int:
@@ -34,8 +52,11 @@ def main(argv: Optional[List[str]] = None) -> int:
         print('usage: python -m mlofc_ros.bench NAME [options]\n')
         for name, text in BENCHMARKS.items():
             print(f'  {name:10s} {text}')
+        print(f'  {"all":10s} every benchmark above with its defaults (make bench)')
         return 0
     name = argv.pop(0)
+    if name == 'all' and not argv:
+        return run_all()
     if name not in BENCHMARKS:
         print(f'unknown benchmark {name!r}; choose from {sorted(BENCHMARKS)}', file=sys.stderr)
         return 2
