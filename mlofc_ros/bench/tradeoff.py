@@ -54,8 +54,8 @@ Setting = Tuple[float, int, bool]
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench tradeoff',
                                  description=__doc__.split('\n\n')[0])
-    ap.add_argument('--scales', default='1.0,0.8,0.6,0.5', help='detector_scale values')
-    ap.add_argument('--every', default='2,3,4,6', help='detect_every values')
+    ap.add_argument('--scales', default='1.0,0.8,0.7,0.6,0.5', help='detector_scale values')
+    ap.add_argument('--every', default='1,2,3,4,5,6,8', help='detect_every values')
     ap.add_argument('--bridge', default='on,off', help='bridge_crossings values (on/off)')
     ap.add_argument('--frames', type=int, default=30, help='frames per tracking sequence')
     ap.add_argument('--seeds', default='0,1,2,3', help='render seeds of the tracking sequences')
