@@ -136,7 +136,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--scenes', default=','.join(SCENES),
                    help=f'comma-separated scenes from {list(SCENES)}')
     p.add_argument('--methods', default='robust,general', help='comma-separated solver methods')
-    p.add_argument('--windows', default='5', help='comma-separated window lengths (frames)')
+    p.add_argument('--windows', default='5,10', help='comma-separated window lengths (frames)')
     p.add_argument('--frames', type=int, default=30, help='frames per sequence (30 Hz)')
     p.add_argument('--seeds', default='0,1,2', help='comma-separated render seeds')
     common.add_param_option(p, 'num_bodies, window and method are')
