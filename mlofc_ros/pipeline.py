@@ -176,7 +176,7 @@ class Pipeline:
         self.params: Dict[str, Any] = _params.defaults()
         self.params.update(_params.check_all(kwargs))
         self.bodies = BodyTracker()
-        self._tracker = self._make_tracker()
+        self._tracker = make_tracker(self.params)
         self._window = TrackWindow(self.params['window'])
         self._stamps: Deque[float] = deque(maxlen=self.params['window'])
         self._intervals: Deque[float] = deque(maxlen=2 * _params.PARAMS['window'].range[1])
@@ -198,12 +198,6 @@ class Pipeline:
 
     # --- configuration -------------------------------------------------------------------
 
-    def _make_tracker(self) -> LineTracker:
-        return make_tracker(self.params)
-
-    def _make_detector(self) -> LineDetector:
-        return make_detector(self.params)
-
     def reconfigure(self, **kwargs: Any) -> None:
         """Change parameters at run time; resets only what the change invalidates.
 
@@ -220,14 +214,14 @@ class Pipeline:
         changed = {k for k, v in new.items() if self.params[k] != v}
         self.params.update(new)
         if 'min_segment_length' in changed:
-            self._tracker = self._make_tracker()
+            self._tracker = make_tracker(self.params)
             self.bodies.forget_tracks()
             self._restart_window()
         else:
             # detection settings, not state: the tracks carry on
             self._tracker.detect_every = int(self.params['detect_every'])
             if changed & {'detector_backend', 'detector_scale'}:
-                self._tracker.detector = self._make_detector()
+                self._tracker.detector = make_detector(self.params)
             self._tracker.detector.bridge = bool(self.params['bridge_crossings'])
         if 'window' in changed:
             self._window = TrackWindow(self.params['window'])

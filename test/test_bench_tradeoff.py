@@ -76,3 +76,4 @@ def test_bench_all_runs_every_benchmark_and_reports_the_worst(monkeypatch) -> No
     monkeypatch.setattr(importlib, 'import_module', fake_import)
     assert bench_main.main(['all']) == 1          # paper failed, the others still ran
     assert ran == [(name, []) for name in BENCHMARKS]
+    assert bench_main.main(['all', '--quick']) == 2 and len(ran) == len(BENCHMARKS)

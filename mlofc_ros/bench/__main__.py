@@ -55,7 +55,11 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'  {"all":10s} every benchmark above with its defaults (make bench)')
         return 0
     name = argv.pop(0)
-    if name == 'all' and not argv:
+    if name == 'all':
+        if argv:
+            print('bench all takes no options (each benchmark runs with its defaults)',
+                  file=sys.stderr)
+            return 2
         return run_all()
     if name not in BENCHMARKS:
         print(f'unknown benchmark {name!r}; choose from {sorted(BENCHMARKS)}', file=sys.stderr)
