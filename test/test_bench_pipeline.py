@@ -70,3 +70,17 @@ def test_ros_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert len(rows) == 2
     assert int(rows[0].split('|')[5]) >= 1
     assert (tmp_path / 'ros.png').is_file()
+
+
+def test_ros_headline_names_the_limit_or_says_it_is_above() -> None:
+    from mlofc_ros.bench import ros
+
+    def row(rate: float, dropped: int) -> dict:
+        return {'rate': rate, 'dropped': dropped, 'published': 100,
+                'answered': 100 - dropped, 'lat_median': 10.0, 'lat_p99': 30.0}
+    assert ros.rate_headline([]) == '- No rate was run.'
+    assert 'none of the rates' in ros.rate_headline([row(5, 3), row(10, 0)])
+    text = ros.rate_headline([row(5, 0), row(10, 0), row(20, 4), row(30, 0)])
+    assert '**10 Hz**' in text and 'At 20 Hz it no longer does' in text
+    text = ros.rate_headline([row(5, 0), row(10, 0)])
+    assert '**10 Hz**' in text and 'the limit lies above it' in text

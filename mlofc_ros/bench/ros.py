@@ -49,7 +49,7 @@ NODE_NAME = 'mlofc'
 IMAGE_TOPIC = '/bench/image_raw'
 INFO_TOPIC = '/bench/camera_info'
 SEG_TOPIC = f'/{NODE_NAME}/segments'
-DEFAULT_RATES = '2,3,5,10,15,20,30,45,60'
+DEFAULT_RATES = '2,3,5,10,15,20,30,45,60,90,120,150'
 
 
 # --- the node side -------------------------------------------------------------------------
@@ -371,6 +371,32 @@ def kept_up(row: Dict[str, Any]) -> bool:
     return row['dropped'] == 0 and row['answered'] == row['published']
 
 
+def rate_headline(rows: Sequence[Dict[str, Any]]) -> str:
+    """Headline line: the highest rate kept up with, at it and every lower rate (rising rows).
+
+    When the node keeps up with every rate run, the limit is above the highest: the line says
+    so instead of calling that rate the limit.
+    """
+    if not rows:
+        return '- No rate was run.'
+    best = None
+    for r in rows:
+        if not kept_up(r):
+            break
+        best = r
+    if best is None:
+        return f'- The node kept up with none of the rates (lowest {rows[0]["rate"]:g} Hz).'
+    text = (f'- Highest rate kept up with (all frames answered, none dropped, and the same at '
+            f'every lower rate): **{best["rate"]:g} Hz**; latency there median '
+            f'**{best["lat_median"]:.0f} ms**, p99 {best["lat_p99"]:.0f} ms.')
+    if best is rows[-1]:
+        text += (' That is the highest rate run: the limit lies above it (run higher '
+                 '`--rates`).')
+    else:
+        text += f' At {rows[rows.index(best) + 1]["rate"]:g} Hz it no longer does.'
+    return text
+
+
 def plot(path: pathlib.Path, rows: Sequence[Dict[str, Any]]) -> None:
     fig, (a, b) = common.new_figure(2)
     rates = [r['rate'] for r in rows]
@@ -405,21 +431,9 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
          'Wall time': f'{wall:.0f} s on a shared 2-core machine (bench and node compete for it)',
          'Load average (1 min) at start / end':
              f'{res["load"][0]:.1f} / {os.getloadavg()[0]:.1f}'})
-    best = None
-    for r in rows:
-        if not kept_up(r):
-            break
-        best = r
     fastest = max((r['out_rate'] for r in rows if math.isfinite(r['out_rate'])),
                   default=math.nan)
-    lines = [head, '## Headline', '']
-    if best is not None:
-        lines.append(f'- Highest rate kept up with (all frames answered, none dropped, and '
-                     f'the same at every lower rate): **{best["rate"]:g} Hz**; latency there '
-                     f'median **{best["lat_median"]:.0f} ms**, p99 {best["lat_p99"]:.0f} ms.')
-    else:
-        lines.append(f'- The node kept up with none of the rates (lowest '
-                     f'{rows[0]["rate"]:g} Hz).' if rows else '- No rate was run.')
+    lines = [head, '## Headline', '', rate_headline(rows)]
     cpu = np.array([r['proc_cpu'] for r in rows], dtype=float)
     wall_ms = np.array([r['proc_wall'] for r in rows], dtype=float)
     cpu_med = float(np.nanmedian(cpu)) if np.isfinite(cpu).any() else math.nan
