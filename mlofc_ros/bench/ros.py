@@ -363,7 +363,8 @@ def _one_rate(bench: Bench, stats_path: pathlib.Path, proc: Any, rate: float,
             'lat_p99': float(np.percentile(lat, 99)) if lat.size else math.nan,
             'lat_max': float(lat.max()) if lat.size else math.nan,
             'proc_wall': float(np.median(proc_wall)) if proc_wall.size else math.nan,
-            'proc_cpu': float(np.median(proc_cpu)) if proc_cpu.size else math.nan}
+            'proc_cpu': float(np.median(proc_cpu)) if proc_cpu.size else math.nan,
+            'proc_max': float(proc_wall.max()) if proc_wall.size else math.nan}
 
 
 def kept_up(row: Dict[str, Any]) -> bool:
@@ -451,11 +452,11 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
                   ['rate Hz', 'achieved Hz', 'published', 'node received', 'answered',
                    'dropped (node queue)', 'lost before node', 'skipped', 'answers/s',
                    'latency median ms', 'latency p99 ms', 'latency max ms',
-                   'process wall ms', 'process CPU ms', 'kept up'],
+                   'process wall ms', 'process CPU ms', 'process wall max ms', 'kept up'],
                   [[r['rate'], r['achieved'], r['published'], r['received'], r['answered'],
                     r['dropped'], r['lost'], r['skipped'], r['out_rate'], r['lat_median'],
                     r['lat_p99'], r['lat_max'], r['proc_wall'], r['proc_cpu'],
-                    'yes' if kept_up(r) else 'no']
+                    r.get('proc_max', math.nan), 'yes' if kept_up(r) else 'no']
                    for r in rows]),
               "- published: images sent; node received / dropped / skipped: the node's own "
               'counters (`MlofcNode.stats`) over the rate; lost before node = published - '
@@ -468,7 +469,9 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
               "node, wall time and the worker thread's CPU time (`time.thread_time`); wall "
               'well above CPU means the node waited for a core (shared machine) or the GIL. '
               'When the node drops most frames, the frames it does process are farther apart: '
-              'larger motion between them makes tracking and solving costlier per frame.', '',
+              'larger motion between them makes tracking and solving costlier per frame. '
+              '`process wall max`: the slowest call (a latency max far above it was spent '
+              'outside `Pipeline.process`: queue, transport, scheduling).', '',
               '![drops and latency](ros.png)', '']
     return '\n'.join(lines)
 
