@@ -77,3 +77,14 @@ def test_bench_all_runs_every_benchmark_and_reports_the_worst(monkeypatch) -> No
     assert bench_main.main(['all']) == 1          # paper failed, the others still ran
     assert ran == [(name, []) for name in BENCHMARKS]
     assert bench_main.main(['all', '--quick']) == 2 and len(ran) == len(BENCHMARKS)
+
+
+def test_pooled_score_weights_sequences_and_goal_per_sequence() -> None:
+    from mlofc_ros.bench import frontend
+    scores = [{'tracked_5': 1.0, 'windows': 30, 'id_switch_pct': 0.5, 'transitions': 100},
+              {'tracked_5': 0.5, 'windows': 10, 'id_switch_pct': float('nan'),
+               'transitions': 0}]
+    assert frontend.pooled_score(scores, 'tracked_5', 'windows') == 0.875
+    assert frontend.pooled_score(scores, 'id_switch_pct', 'transitions') == 0.5
+    assert frontend.meets_goal(scores[0]) and not frontend.meets_goal(scores[1])
+    assert not frontend.meets_goal({'tracked_5': 0.95, 'id_switch_pct': 1.0})

@@ -382,22 +382,39 @@ def run_tracker(make: Callable[[], LineTracker], frames: Sequence[np.ndarray],
             'ref_cpu': np.asarray(ref_cpu)}
 
 
+#: Issue #3's tracking goal (per sequence and pooled): ``tracked 5`` at least this, id
+#: switches (%) below this.
+TRACKED_GOAL, SWITCH_GOAL_PCT = 0.90, 1.0
+
+
+def pooled_score(scores: Sequence[Dict[str, float]], key: str, weight: str) -> float:
+    """Pool ``key`` of :func:`score_tracks` results over sequences, weighted by ``weight``.
+
+    E.g. ``tracked_5`` by ``windows`` (every edge window of every sequence counts once),
+    ``id_switch_pct`` by ``transitions``; NaN when no sequence has a finite value.
+    """
+    w = np.array([float(sc[weight]) for sc in scores])
+    v = np.array([float(sc[key]) for sc in scores])
+    ok = np.isfinite(v) & (w > 0)
+    return float(np.sum(v[ok] * w[ok]) / np.sum(w[ok])) if ok.any() else float('nan')
+
+
+def meets_goal(score: Dict[str, float]) -> bool:
+    """Whether one sequence's :func:`score_tracks` result meets issue #3's goal."""
+    return score['tracked_5'] >= TRACKED_GOAL and score['id_switch_pct'] < SWITCH_GOAL_PCT
+
+
 def pooled_row(scores: Sequence[Dict[str, float]]) -> List[object]:
     """Tracking-table row over all sequences: ``tracked 5`` and id switches pooled.
 
     ``tracked 5`` over every (edge, 5-frame window) of every sequence, id switches over every
     transition; the other columns are means of the per-sequence values.
     """
-    def pool(key: str, weight: str) -> float:
-        w = np.array([float(sc[weight]) for sc in scores])
-        v = np.array([float(sc[key]) for sc in scores])
-        ok = np.isfinite(v) & (w > 0)
-        return float(np.sum(v[ok] * w[ok]) / np.sum(w[ok])) if ok.any() else float('nan')
-
     def mean(key: str) -> float:
         return float(np.nanmean([float(sc[key]) for sc in scores]))
-    return [f'all {len(scores)} (pooled)', pool('tracked_5', 'windows'),
-            mean('tracked_5_resolvable'), mean('recall'), pool('id_switch_pct', 'transitions'),
+    return [f'all {len(scores)} (pooled)', pooled_score(scores, 'tracked_5', 'windows'),
+            mean('tracked_5_resolvable'), mean('recall'),
+            pooled_score(scores, 'id_switch_pct', 'transitions'),
             mean('id_switch_pct_resolvable'), mean('id_jump_pct'),
             mean('cross_body_jump_pct'), mean('line_err_px'), mean('endpoint_err_px'),
             mean('precision'), mean('unresolvable_window_pct')]
@@ -406,7 +423,7 @@ def pooled_row(scores: Sequence[Dict[str, float]]) -> List[object]:
 def _goal_text(track_rows: Sequence[Sequence[object]]) -> str:
     """Say how the rows (per sequence, then pooled) meet issue #3's tracking goal."""
     per, pooled = track_rows[:-1], track_rows[-1]
-    good = [r for r in per if float(r[1]) >= 0.90 and float(r[4]) < 1.0]
+    good = [r for r in per if float(r[1]) >= TRACKED_GOAL and float(r[4]) < SWITCH_GOAL_PCT]
     short = '; '.join(f'{r[0]} {float(r[1]):.3f} / {float(r[4]):.2f}%'
                       for r in per if r not in good)
     return (f'Goal (issue #3): `tracked 5` >= 0.90 and id switches < 1%. Pooled over all '
