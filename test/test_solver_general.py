@@ -19,8 +19,8 @@ from scenes import random_scene
 from mlofc_ros.solver import segment_lines
 from mlofc_ros.solver.general import (_lm_runs, _pivot_translation, fit_body,
                                       fit_body_multistart, general_warm, line_residuals,
-                                      LineObservations, marginal_residuals, necker_mirror,
-                                      position_costs)
+                                      LineObservations, marginal_residuals,
+                                      marginal_segmentation, necker_mirror, position_costs)
 from mlofc_ros.solver.lines import rotation_matrix
 
 
@@ -160,6 +160,24 @@ def test_init_motions_are_checked_and_used():
     res = segment_lines(tracks, 1, intrinsics=intr, method='general', init_labels=labels,
                         init_motions=(np.full((1, 3), np.nan), np.full((1, 3), np.nan)))
     assert res.info['start'] != 'warm'
+
+
+def test_warm_path_scores_each_body_as_an_image_blob_too(monkeypatch):
+    # the tracked bodies are assigned with the image-position term, like the cold search
+    import mlofc_ros.solver.core as core
+    seen = []
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs)
+        return marginal_segmentation(*args, **kwargs)
+    monkeypatch.setattr(core, 'marginal_segmentation', spy)
+    tracks, w, t = spinning_lines(n_lines=25, seed=5)
+    res = segment_lines(tracks, 1, intrinsics=(F, F, C, C), method='general',
+                        init_labels=np.zeros(25, dtype=np.int64),
+                        init_motions=(w[None] * 1.02, t[None]))
+    assert res.info['start'] == 'warm' and len(seen) == 1
+    assert seen[0]['points'].shape == (25, 2)
+    assert seen[0]['position_weight'] == core.WARM_POSITION_WEIGHT > 0
 
 
 def test_batched_evaluations_and_lockstep_fits_match_single_ones_bit_for_bit():

@@ -63,6 +63,14 @@ GENERAL_ROBUST_POLISH = True
 #: one, 32% wrong, 13% with none).
 RESCAN_MARGIN_ROBUST = 0.0
 
+#: Weight of each body's image-position term (:func:`.general.position_costs`, times the
+#: noise level) in the warm path's assignment (the pipeline's tracked bodies; the cold search
+#: uses :data:`.general.POSITION_WEIGHT`). Spinning benchmark, window 10, mean wrong % own2+bg
+#: / own3+bg / own2 / own3 over render seeds 0-5: none 6.5 / 10.6 / 1.6 / 5.2, 0.5 2.8 / 9.8 /
+#: 0.7 / 6.0, 1.0 2.3 / 10.5 / 0.4 / 3.0, 2.0 7.6 / 7.5 / 0.1 / 2.5; held-out seeds 6-8:
+#: none 3.3 / 9.1 / 0.4 / 3.9, 1.0 3.4 / 3.8 / 0.0 / 0.5; cam2+bg 0.10 -> 0.07 (session 13).
+WARM_POSITION_WEIGHT = 1.0
+
 #: Random restarts of the paper's K-means from a random labelling (the best is kept).
 KMEANS_RESTARTS = 10
 
@@ -385,11 +393,15 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
                                                            rot.angular_velocities),
                                 np.where(known[:, None], t0, 0.0), known)
             if warm['inliers'] >= WARM_INLIERS:
-                # the warm fits (fitted directions) give the noise level and the starts
+                # the warm fits (fitted directions) give the noise level and the starts; each
+                # body is also a blob in the image, as in the cold search (compact bodies keep
+                # their lines when the motion costs alone would let a neighbour take them)
                 sol = marginal_segmentation(obs, n, [('warm', warm['labels'])], warm['W'],
                                             warm['T'], NOISE_FACTOR * warm['sigma2'],
                                             rounds=2, iterations=4, neighbours=neighbours,
-                                            keep=1, first_iterations=4, pivots=False)
+                                            keep=1, first_iterations=4, pivots=False,
+                                            points=obs.midpoints,
+                                            position_weight=WARM_POSITION_WEIGHT)
     if sol is None:
         starts = [('rotation-only', rot.labels),
                   ('spatial', spatial_labels(obs.midpoints, n, rng))]
