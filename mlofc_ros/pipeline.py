@@ -54,6 +54,15 @@ MIN_BODY_TRACKS = 4
 #: With no calibration, the focal length is fixed to the median of this many window estimates.
 FOCAL_SAMPLES = 8
 
+#: Method 'general' answers with the rotation-only solve ('robust') until the window holds this
+#: many frames (or all of a shorter window). Its first, cold search decides the grouping the
+#: warm starts then track; on 3 frames (2 constraints per line) it was often wrong and stayed
+#: so. Spinning benchmark, window 10, mean wrong % own2+bg / own3+bg / own2 / own3 over render
+#: seeds 0-5 (3 -> 5): 2.3 / 10.4 / 0.4 / 3.0 -> 3.8 / 5.5 / 0.4 / 2.6, held-out seeds 6-8
+#: 3.4 / 3.8 / 0.0 / 0.5 -> 1.5 / 3.1 / 0.0 / 0.1; 4 frames (3.1 / 10.2 / 0.5 / -) and the
+#: whole window (10: 4.3 / 22.6 / 1.1 / 0.4) were worse (session 13).
+GENERAL_MIN_FRAMES = 5
+
 
 @dataclass
 class FrameResult:
@@ -418,9 +427,12 @@ class Pipeline:
         if fill >= 2 and len(win_ids) and not blank:     # a blank frame observes no motion
             init = self.bodies.previous_labels(win_ids) if n_req > 0 else None
             motions, rescan = None, None
+            method = self.params['method']
+            if method == 'general' and fill < min(GENERAL_MIN_FRAMES, self.params['window']):
+                method = 'robust'
             if init is not None:
                 init = np.where(init < n_req, init, -1)
-                if self.params['method'] == 'general' and self._motions:
+                if method == 'general' and self._motions:
                     motions = (np.full((n_req, 3), np.nan), np.full((n_req, 3), np.nan))
                     for body, (w_b, t_b) in self._motions.items():
                         if body < n_req:
@@ -430,7 +442,7 @@ class Pipeline:
             try:
                 res = segment_lines(np.asarray(win_tracks, dtype=np.float64), n_req,
                                     intrinsics=intrinsics, image_size=size,
-                                    method=self.params['method'], seed=int(self.params['seed']),
+                                    method=method, seed=int(self.params['seed']),
                                     init_labels=init, init_motions=motions, rescan=rescan)
             except (ValueError, NotImplementedError) as exc:
                 problems.append(f'solver: {exc}')

@@ -511,3 +511,27 @@ def test_general_rescans_one_body_per_frame_in_turn(monkeypatch):
     asked.clear()
     run(Pipeline(num_bodies=2, window=3), seq)                    # 'robust': nothing to rescan
     assert asked and all(r is None for r in asked)
+
+
+def test_general_starts_once_the_window_holds_enough_frames(monkeypatch):
+    # a cold 'general' search on 2-4 frames decides a grouping the warm starts keep: until the
+    # window holds GENERAL_MIN_FRAMES (or all of a shorter window) the rotation-only solve answers
+    import mlofc_ros.pipeline as pipeline_module
+    seq = small_sequence()
+    methods = []
+
+    def spy(*args, **kwargs):
+        methods.append(kwargs['method'])
+        return segment_lines(*args, **kwargs)
+    monkeypatch.setattr(pipeline_module, 'segment_lines', spy)
+    first = pipeline_module.GENERAL_MIN_FRAMES
+    p = Pipeline(num_bodies=2, window=first + 1, method='general')
+    for img, t in zip(seq.frames[:first + 2], seq.stamps[:first + 2]):
+        p.process(img, t, seq.camera)
+    # frame 0 has no flow; frames 1 .. first-2 hold 2 .. first-1 frames
+    assert methods == ['robust'] * (first - 2) + ['general'] * 3
+    methods.clear()
+    p = Pipeline(num_bodies=2, window=3, method='general')        # a shorter window: from 3
+    for img, t in zip(seq.frames[:4], seq.stamps[:4]):
+        p.process(img, t, seq.camera)
+    assert methods == ['robust', 'general', 'general']
