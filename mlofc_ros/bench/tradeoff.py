@@ -21,7 +21,8 @@ Run ``python -m mlofc_ros.bench tradeoff``; writes ``docs/results/tradeoff.md`` 
   (boxes rotating about the camera centre + background, 60 frames), thread CPU ms per frame,
   with OpenCV's default LSD on the same frame right after it as the reference. The ratio of
   MEANS counts the detection frames (the detector runs on every ``detect_every``-th frame
-  only), so it is the throughput; the ratio of medians is a tracking frame. Issue #7's goal:
+  only), so it is the throughput; the ratio of medians is that of a frame without detection
+  (with ``detect_every`` >= 3; at 1-2 most frames detect). Issue #7's goal:
   the pipeline at most 0.5 x LSD.
 - **quality**: the tracker the pipeline builds from the same parameters
   (:func:`~mlofc_ros.pipeline.make_tracker`) on the eight rendered sequences of ``bench
