@@ -400,7 +400,7 @@ def pooled_score(scores: Sequence[Dict[str, float]], key: str, weight: str) -> f
 
 
 def meets_goal(score: Dict[str, float]) -> bool:
-    """Whether one sequence's :func:`score_tracks` result meets issue #3's goal."""
+    """Whether ``score`` (``tracked_5``, ``id_switch_pct``: one sequence's or pooled) meets #3."""
     return score['tracked_5'] >= TRACKED_GOAL and score['id_switch_pct'] < SWITCH_GOAL_PCT
 
 
@@ -423,7 +423,8 @@ def pooled_row(scores: Sequence[Dict[str, float]]) -> List[object]:
 def _goal_text(track_rows: Sequence[Sequence[object]]) -> str:
     """Say how the rows (per sequence, then pooled) meet issue #3's tracking goal."""
     per, pooled = track_rows[:-1], track_rows[-1]
-    good = [r for r in per if float(r[1]) >= TRACKED_GOAL and float(r[4]) < SWITCH_GOAL_PCT]
+    good = [r for r in per
+            if meets_goal({'tracked_5': float(r[1]), 'id_switch_pct': float(r[4])})]
     short = '; '.join(f'{r[0]} {float(r[1]):.3f} / {float(r[4]):.2f}%'
                       for r in per if r not in good)
     return (f'Goal (issue #3): `tracked 5` >= 0.90 and id switches < 1%. Pooled over all '

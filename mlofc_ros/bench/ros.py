@@ -456,7 +456,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
                   [[r['rate'], r['achieved'], r['published'], r['received'], r['answered'],
                     r['dropped'], r['lost'], r['skipped'], r['out_rate'], r['lat_median'],
                     r['lat_p99'], r['lat_max'], r['proc_wall'], r['proc_cpu'],
-                    r.get('proc_max', math.nan), 'yes' if kept_up(r) else 'no']
+                    r['proc_max'], 'yes' if kept_up(r) else 'no']
                    for r in rows]),
               "- published: images sent; node received / dropped / skipped: the node's own "
               'counters (`MlofcNode.stats`) over the rate; lost before node = published - '
