@@ -27,11 +27,12 @@ Example::
         r.labels, r.angular_velocities      # (M,), (2, 3) rad/s
 """
 from collections import deque
+import dataclasses
 from dataclasses import dataclass, field
 import math
 import statistics
 import time
-from typing import Any, Deque, Dict, List, Mapping, Optional, Tuple
+from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Set, Tuple
 
 import numpy as np
 
@@ -132,6 +133,81 @@ class FrameResult:
         return bool(np.any(self.body_valid))
 
 
+@dataclass
+class Observation:
+    """One frame tracked and added to the window, not yet solved (:meth:`Pipeline.observe`).
+
+    Attributes
+    ----------
+    stamp : float
+        The frame's stamp, seconds.
+    gray : (H, W) uint8
+        The image (for a debug drawing).
+    segments : (M, 4) float32
+        Segments of this frame, pixels as detected (distorted).
+    track_ids : (M,) uint32
+        Their track ids.
+    win_ids : (N,) int64
+        Ids of the tracks of the window handed to the solver.
+    win_tracks : (N, K, 4) float64
+        Their endpoints over the window (undistorted) px, NaN where a track was not seen.
+    intrinsics : (fx, fy, cx, cy) or None
+        Solver intrinsics, px; None = estimate the focal length.
+    image_size : (width, height)
+        Pixels.
+    window_fill : int
+        Frames in the window (K).
+    frame_interval : float
+        Median frame interval of the window, s (NaN with one frame).
+    blank : bool
+        The image had no contrast (no lines, nothing to solve).
+    problems : list of str
+        What went wrong so far (reported with the result).
+    timings : dict
+        Milliseconds of ``detect_track``, ``undistort``, ``window``.
+    resets : frozenset of str
+        Solve-side state to reset before solving: ``'tracks'`` (the tracker restarted and
+        reuses ids), ``'bodies'`` (body ids restart), ``'focal'`` (forget the focal estimate).
+    elapsed_ms : float
+        Milliseconds :meth:`Pipeline.observe` took.
+    skipped : bool
+        The frame was not processed (duplicate stamp): nothing to solve or publish.
+    """
+
+    stamp: float
+    gray: np.ndarray
+    segments: np.ndarray
+    track_ids: np.ndarray
+    win_ids: np.ndarray
+    win_tracks: np.ndarray
+    intrinsics: Optional[Tuple[float, float, float, float]]
+    image_size: Tuple[int, int]
+    window_fill: int
+    frame_interval: float
+    blank: bool
+    problems: List[str]
+    timings: Dict[str, float]
+    resets: FrozenSet[str] = frozenset()
+    elapsed_ms: float = 0.0
+    skipped: bool = False
+
+    @classmethod
+    def skip(cls, stamp: float, gray: np.ndarray, problem: str, fill: int) -> 'Observation':
+        """Make the observation of a frame not processed (``problem`` says why), no resets."""
+        return cls(stamp, gray, np.zeros((0, 4), np.float32), np.zeros(0, np.uint32),
+                   np.zeros(0, np.int64), np.zeros((0, 0, 4)), None, (0, 0), fill, math.nan,
+                   False, [problem], {}, skipped=True)
+
+    def replacing(self, older: 'Observation') -> 'Observation':
+        """Return this observation with the resets and problems of ``older`` (dropped unsolved).
+
+        A solve-side reset (a restart of the tracker, a bag loop) must not be lost with the
+        observation that carried it.
+        """
+        problems = list(dict.fromkeys(older.problems + self.problems))
+        return dataclasses.replace(self, resets=self.resets | older.resets, problems=problems)
+
+
 def _invalid_bodies(n: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     cov = np.zeros((n, 3, 3))
     idx = np.arange(3)
@@ -176,6 +252,10 @@ class Pipeline:
     Keyword parameters are those of :mod:`mlofc_ros.params` (the node's ROS parameters, same
     names and defaults); node-only ones (``queue_size``, ...) are accepted and ignored. Invalid
     values raise ``ValueError``, unknown names ``TypeError``.
+
+    Threads: :meth:`observe` (tracking) and :meth:`solve` may run in two threads at once, each
+    called from one thread at a time; :meth:`reconfigure` and :meth:`reset` only while neither
+    runs. :meth:`process` does both in the calling thread.
     """
 
     def __init__(self, **kwargs: Any) -> None:
@@ -204,6 +284,9 @@ class Pipeline:
         # turn, so that a body tracked in a wrong basin can leave it at a fraction of the cost
         # of rescanning all of them every frame)
         self._rescan = 0
+        # solve-side resets not handed over yet (a tracker failure, a skipped frame's): the
+        # next observation carries them
+        self._pending_resets: Set[str] = set()
 
     # --- configuration -------------------------------------------------------------------
 
@@ -224,8 +307,8 @@ class Pipeline:
         self.params.update(new)
         if 'min_segment_length' in changed:
             self._tracker = make_tracker(self.params)
-            self.bodies.forget_tracks()
             self._restart_window()
+            self.bodies.forget_tracks()
         else:
             # detection settings, not state: the tracks carry on
             self._tracker.detect_every = int(self.params['detect_every'])
@@ -250,6 +333,7 @@ class Pipeline:
         self._last_stamp = None
         self._image_size = None
         self._forget_focal()
+        self._pending_resets = set()
 
     def _forget_focal(self) -> None:
         self._focal_samples.clear()
@@ -260,8 +344,12 @@ class Pipeline:
         self._stamps.clear()
 
     def _restart_tracks(self) -> None:
+        """Restart the tracker and the window.
+
+        The solve side forgets the track ids when it gets an observation whose resets hold
+        ``'tracks'``: the caller adds it.
+        """
         self._tracker.reset()
-        self.bodies.forget_tracks()
         self._restart_window()
 
     @property
@@ -304,13 +392,12 @@ class Pipeline:
             return (f, f, size[0] / 2.0, size[1] / 2.0), None
         return camera.intrinsics, (camera if camera.has_distortion else None)
 
-    def _empty(self, stamp: float, problem: Optional[str], skipped: bool = False
+    def _empty(self, stamp: float, problem: Optional[str], skipped: bool, fill: int
                ) -> FrameResult:
         w, c, v = _invalid_bodies(self.n_bodies)
         return FrameResult(stamp, np.zeros((0, 4), np.float32), np.zeros(0, np.uint32),
                            np.zeros(0, np.int32), np.zeros(0, np.float32), w, c, v,
-                           dict.fromkeys(TIMING_KEYS, 0.0), self.window_fill, problem,
-                           skipped=skipped)
+                           dict.fromkeys(TIMING_KEYS, 0.0), fill, problem, skipped=skipped)
 
     def process(self, gray: np.ndarray, stamp_seconds: float,
                 camera: CameraLike = None) -> FrameResult:
@@ -330,6 +417,20 @@ class Pipeline:
         intrinsics, non-finite stamp). Stamp jumps, too few tracks and solver failures are not
         errors: they are reported in :attr:`FrameResult.problem` (labels -1, bodies invalid).
         An exception from the line tracker propagates after the tracks are restarted.
+
+        The same as ``solve(observe(gray, stamp_seconds, camera))``.
+        """
+        return self.solve(self.observe(gray, stamp_seconds, camera))
+
+    def observe(self, gray: np.ndarray, stamp_seconds: float,
+                camera: CameraLike = None) -> Observation:
+        """Track the lines of one frame and add them to the window; do not solve.
+
+        Arguments and errors as :meth:`process`. The returned :class:`Observation` goes to
+        :meth:`solve`, which may run in another thread, one observation at a time, while this
+        method runs on the next frames (the node does so: tracking keeps the camera's rate
+        when the solver cannot). Observations must be solved in order; one may be dropped
+        unsolved when a newer one replaces it with :meth:`Observation.replacing`.
         """
         t0 = time.perf_counter()
         gray = self._check_image(gray)
@@ -338,27 +439,29 @@ class Pipeline:
             raise ValueError(f'stamp must be finite, got {stamp_seconds!r}')
         cam = as_camera(camera)
         size = (int(gray.shape[1]), int(gray.shape[0]))
-        problems = []
+        problems: List[str] = []
+        resets: Set[str] = set()
 
         if self._image_size is not None and size != self._image_size:
             problems.append(f'image size changed from {self._image_size[0]}x'
                             f'{self._image_size[1]} to {size[0]}x{size[1]}; tracks restarted')
             self._restart_tracks()
+            resets |= {'tracks', 'focal'}
             self._intervals.clear()
-            self._forget_focal()
+            self._focal_fixed = None    # the solve side forgets its samples (resets)
         self._image_size = size
 
         if self._last_stamp is not None:
             dt = stamp - self._last_stamp
             if dt == 0.0:
-                return self._empty(stamp, f'duplicate stamp {stamp:.9f} s; frame skipped',
-                                   skipped=True)
+                self._pending_resets |= resets     # for the next observation to carry
+                return Observation.skip(stamp, gray, f'duplicate stamp {stamp:.9f} s; frame '
+                                        'skipped', self.window_fill)
             if dt < 0.0:
                 problems.append(f'stamp went back {-dt:.3f} s (bag loop or clock reset); '
                                 'tracks and window restarted')
                 self._restart_tracks()
-                self.bodies.reset()
-                self._motions.clear()
+                resets |= {'tracks', 'bodies'}
                 self._intervals.clear()
             else:
                 gap = float(self.params['max_frame_gap'])
@@ -369,6 +472,7 @@ class Pipeline:
                     problems.append(f'{dt:.3f} s since the last frame (> {gap:g} x '
                                     f'{nominal:.3f} s); window restarted')
                     self._restart_tracks()
+                    resets.add('tracks')
                     self._intervals.clear()
                 else:
                     self._intervals.append(dt)
@@ -391,7 +495,10 @@ class Pipeline:
             try:
                 track_ids, segments = self._tracker.update(gray)
             except Exception:
-                self._restart_tracks()  # its state may be half-updated: start clean next frame
+                # its state may be half-updated: start clean next frame (and the solve side
+                # forgets the old ids with the next observation)
+                self._restart_tracks()
+                self._pending_resets.add('tracks')
                 raise
         track_ids = np.asarray(track_ids, dtype=np.uint32).ravel()
         segments = np.asarray(segments, dtype=np.float32).reshape(-1, 4)
@@ -413,18 +520,51 @@ class Pipeline:
         win_ids = np.asarray(win_ids).astype(np.int64).ravel()
         timings['window'] = (time.perf_counter() - t) * 1e3
 
-        n_req = int(self.params['num_bodies'])
         fill = len(self._stamps)
         stamps = list(self._stamps)
         interval = (float(statistics.median([b - a for a, b in zip(stamps, stamps[1:])]))
                     if fill >= 2 else math.nan)
+        resets |= self._pending_resets
+        self._pending_resets = set()
+        return Observation(stamp=stamp, gray=gray, segments=segments, track_ids=track_ids,
+                           win_ids=win_ids, win_tracks=np.asarray(win_tracks, dtype=np.float64),
+                           intrinsics=intrinsics, image_size=size, window_fill=fill,
+                           frame_interval=interval, blank=blank, problems=problems,
+                           timings=timings, resets=frozenset(resets),
+                           elapsed_ms=(time.perf_counter() - t0) * 1e3)
+
+    def solve(self, obs: Observation) -> FrameResult:
+        """Segment the window of ``obs`` (from :meth:`observe`) and return the frame's result.
+
+        Call from one thread at a time, in the order of the observations; it may run alongside
+        :meth:`observe` of later frames.
+        """
+        t0 = time.perf_counter()
+        if 'tracks' in obs.resets:
+            self.bodies.forget_tracks()     # the tracker restarted and may reuse track ids
+        if 'bodies' in obs.resets:
+            self.bodies.reset()
+            self._motions.clear()
+        if 'focal' in obs.resets:
+            self._forget_focal()
+        if obs.skipped:
+            return self._empty(obs.stamp, '; '.join(obs.problems) or None, skipped=True,
+                               fill=obs.window_fill)
+        stamp = obs.stamp
+        problems = list(obs.problems)
+        timings = dict(obs.timings)
+        segments, track_ids = obs.segments, obs.track_ids
+        win_ids, win_tracks = obs.win_ids, obs.win_tracks
+        intrinsics, size, fill = obs.intrinsics, obs.image_size, obs.window_fill
+        interval = obs.frame_interval
+        n_req = int(self.params['num_bodies'])
         labels = np.full(len(segments), -1, dtype=np.int32)
         carried = np.zeros(len(segments), dtype=bool)
         residuals = np.full(len(segments), np.nan, dtype=np.float32)
         focal = math.nan
-        t = time.perf_counter()
         res = None
-        if fill >= 2 and len(win_ids) and not blank:     # a blank frame observes no motion
+        t = time.perf_counter()
+        if fill >= 2 and len(win_ids) and not obs.blank:     # a blank frame observes no motion
             init = self.bodies.previous_labels(win_ids) if n_req > 0 else None
             motions, rescan = None, None
             method = self.params['method']
@@ -440,15 +580,14 @@ class Pipeline:
                     rescan = [self._rescan % n_req]
                     self._rescan = (self._rescan + 1) % n_req
             try:
-                res = segment_lines(np.asarray(win_tracks, dtype=np.float64), n_req,
-                                    intrinsics=intrinsics, image_size=size,
+                res = segment_lines(win_tracks, n_req, intrinsics=intrinsics, image_size=size,
                                     method=method, seed=int(self.params['seed']),
                                     init_labels=init, init_motions=motions, rescan=rescan)
             except (ValueError, NotImplementedError) as exc:
                 problems.append(f'solver: {exc}')
             except Exception as exc:  # noqa: B902 (a solver failure must not lose the frame)
                 problems.append(f'solver failed: {type(exc).__name__}: {exc}')
-        elif fill >= 2 and not blank:
+        elif fill >= 2 and not obs.blank:
             problems.append('no line tracks in the window')
         timings['solve'] = (time.perf_counter() - t) * 1e3
 
@@ -493,7 +632,7 @@ class Pipeline:
                     self._focal_fixed = float(np.median(self._focal_samples))
         else:
             w_out, c_out, v_out = _invalid_bodies(self.n_bodies)
-        timings['total'] = (time.perf_counter() - t0) * 1e3
+        timings['total'] = obs.elapsed_ms + (time.perf_counter() - t0) * 1e3
         return FrameResult(
             stamp=stamp, segments=segments, track_ids=track_ids, labels=labels,
             residuals=residuals.astype(np.float32), angular_velocities=w_out,

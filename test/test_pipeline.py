@@ -235,6 +235,37 @@ def test_stamp_going_back_restarts_once_and_duplicates_are_skipped():
     assert nxt.problem is None and nxt.window_fill == 2          # reported once
 
 
+def test_observe_and_solve_split_and_a_dropped_observation_keeps_its_resets(monkeypatch):
+    """The node tracks every frame (observe) and solves only the newest (solve): a reset that
+    a dropped observation carried (bag loop, tracker restart) reaches the solver anyway."""
+    seq = small_sequence()
+    p = Pipeline(num_bodies=2, window=3)
+    cam = seq.camera
+    for i in range(4):
+        obs = p.observe(seq.frames[i], seq.stamps[i], cam)
+        assert not obs.resets and obs.window_fill == min(i + 1, 3)
+        r = p.solve(obs)
+        assert r.stamp == obs.stamp and r.timings['total'] >= obs.elapsed_ms
+    assert p.bodies.n_slots > 0
+    back = p.observe(seq.frames[4], seq.stamps[1], cam)             # bag loop: dropped
+    assert back.resets == {'tracks', 'bodies'} and p.bodies.n_slots > 0
+    nxt = p.observe(seq.frames[5], seq.stamps[1] + 1 / 30, cam)
+    assert not nxt.resets
+    merged = nxt.replacing(back)
+    assert merged.resets == back.resets and merged.stamp == nxt.stamp
+    r = p.solve(merged)
+    assert 'went back' in r.problem and r.window_fill == 2 and r.stamp == nxt.stamp
+    # a tracker failure: the next observation tells the solver to forget the old track ids
+    monkeypatch.setattr(p._tracker, 'update', lambda gray: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        p.observe(seq.frames[6], seq.stamps[1] + 2 / 30, cam)
+    monkeypatch.undo()
+    dup = p.observe(seq.frames[6], seq.stamps[1] + 2 / 30, cam)     # skipped: carries none
+    assert dup.skipped and not dup.resets and p.solve(dup).skipped
+    obs = p.observe(seq.frames[6], seq.stamps[1] + 3 / 30, cam)
+    assert obs.resets == {'tracks'} and obs.window_fill == 1
+
+
 def test_a_gap_in_the_stamps_restarts_the_window():
     seq = small_sequence()
     p = Pipeline(num_bodies=2, window=3, max_frame_gap=3.0)
