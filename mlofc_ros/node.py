@@ -17,7 +17,7 @@ Topics (relative names, remap as usual)::
 
     sub  image               sensor_msgs/Image              sensor-data QoS (best effort)
     sub  camera_info         sensor_msgs/CameraInfo         sensor-data QoS
-    pub  ~/segments          sensor_msgs/PointCloud2        one per processed image
+    pub  ~/segments          sensor_msgs/PointCloud2        one per solved image (see below)
     pub  ~/body_<i>/twist    geometry_msgs/TwistWithCovarianceStamped, i = 0..num_bodies-1
     pub  ~/debug_image       sensor_msgs/Image bgr8         if publish_debug_image or subscribed
     pub  /diagnostics        diagnostic_msgs/DiagnosticArray  1 Hz, see below
@@ -38,9 +38,15 @@ last problem and its age; level WARN while a problem is less than :attr:`MlofcNo
 seconds old, OK otherwise.
 
 The subscription callback only queues the image (a bounded queue of ``queue_size`` frames that
-drops the stalest frame); a worker thread decodes, runs the pipeline and publishes, so the
-executor is never blocked by the solver and any executor (``rclpy.spin``, a
-MultiThreadedExecutor, ...) can host the node.
+drops the stalest frame), so the executor is never blocked by the work and any executor
+(``rclpy.spin``, a MultiThreadedExecutor, ...) can host the node. The tracking worker
+decodes every queued image, tracks its lines and adds them to the window
+(:meth:`Pipeline.observe`). A fast solve (the last one under :data:`INLINE_SOLVE_S`) follows in
+the same thread (:meth:`Pipeline.solve`, then publishing). A slow one (method ``general``:
+0.3-3 s per window) goes to a solver worker, which segments the newest window it has not
+solved yet while the tracking worker goes on: the tracker still sees every frame, so its
+tracks survive; the frames tracked while the solver was busy are not published (counted as
+dropped, ``unsolved`` in ``stats``) except the newest, which it solves next.
 Parameters: see :mod:`mlofc_ros.params` (``ros2 param describe /mlofc <name>``); all can be
 changed at run time, invalid values are rejected with the reason and the old value kept. Write
 doubles as ``-p focal_length:=500.0`` (``:=500`` is accepted too: doubles are declared with
@@ -71,7 +77,7 @@ from mlofc_ros import params as P
 from mlofc_ros.camera import CameraModel
 from mlofc_ros.image import image_msg_to_gray
 from mlofc_ros.messages.debug import draw_debug
-from mlofc_ros.pipeline import FrameResult, Pipeline
+from mlofc_ros.pipeline import FrameResult, Observation, Pipeline
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
                                     segments_msg, stamp_to_seconds, twist_msg)
 
@@ -81,6 +87,11 @@ OUTPUT_DEPTH = 10
 DIAGNOSTICS_PERIOD = 1.0
 #: Default seconds a problem keeps the diagnostic level at WARN.
 PROBLEM_HOLD = 5.0
+#: The tracking worker solves a frame itself when the solver worker is idle and the last
+#: solve took less than this (s); otherwise the solver worker does, while tracking goes on.
+INLINE_SOLVE_S = 0.03
+#: Solver methods always left to the solver worker (their first search takes seconds).
+SLOW_METHODS = ('general',)
 
 
 #: Most kinds of problem remembered for throttling (a flood of new kinds restarts the table).
@@ -138,7 +149,11 @@ class MlofcNode(Node):
         self._frame_id = ''
         #: Seconds a problem keeps ``/diagnostics`` at WARN.
         self.problem_hold = PROBLEM_HOLD
-        self.stats = {'received': 0, 'processed': 0, 'dropped': 0, 'skipped': 0, 'errors': 0}
+        #: frame counters: received = processed (published) + dropped + skipped + errors;
+        #: dropped counts the queue's drops and the ``unsolved`` frames (tracked, then replaced
+        #: by a newer one before the solver was free)
+        self.stats = {'received': 0, 'processed': 0, 'dropped': 0, 'skipped': 0, 'errors': 0,
+                      'unsolved': 0}
         self.last_result: Optional[FrameResult] = None
 
         self._pipeline = Pipeline(**{k: values[k] for k in P.names('pipeline')})
@@ -161,9 +176,18 @@ class MlofcNode(Node):
         self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
 
+        # the newest observation waiting for the solver (with its image header and debug
+        # flag), and whether the solver is busy: guarded by _lock, signalled by _solve_wake
+        self._observed: Optional[Tuple[Any, Observation, bool]] = None
+        self._solving = False
+        self._last_solve_s = 0.0            # wall time of the last solve
+        self._solve_wake = threading.Condition(self._lock)
         self._stop = threading.Event()
-        self._worker = threading.Thread(target=self._run, name='mlofc_worker', daemon=True)
+        self._worker = threading.Thread(target=self._run, name='mlofc_tracking', daemon=True)
+        self._solver = threading.Thread(target=self._run_solver, name='mlofc_solver',
+                                        daemon=True)
         self._worker.start()
+        self._solver.start()
         self.get_logger().info(
             f'listening on {self.resolve_topic_name("image")} with '
             f'num_bodies={values["num_bodies"]}, window={values["window"]}, '
@@ -182,7 +206,7 @@ class MlofcNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: List[Parameter]) -> None:
-        """Apply accepted changes: pipeline ones at the worker's next frame, the rest now."""
+        """Apply accepted changes: pipeline ones before the next frame's tracking, others now."""
         changed = {p.name: P.coerce(p.name, p.value) for p in parameters if p.name in P.PARAMS}
         if not changed or not hasattr(self, '_worker'):
             return                          # declaration time: the constructor reads values
@@ -286,6 +310,7 @@ class MlofcNode(Node):
             'frames received': stats['received'],
             'frames processed': stats['processed'],
             'frames dropped': stats['dropped'],
+            'frames tracked, not solved': stats['unsolved'],
             'frames skipped': stats['skipped'],
             'errors': stats['errors'],
             'last problem': problem[1] if problem is not None else 'none',
@@ -299,6 +324,7 @@ class MlofcNode(Node):
     # --- worker --------------------------------------------------------------------------
 
     def _run(self) -> None:
+        """Tracking worker: decode, track and window every queued image."""
         while not self._stop.is_set():
             with self._lock:
                 while not self._queue and not self._stop.is_set():
@@ -308,22 +334,32 @@ class MlofcNode(Node):
                 item = self._queue.popleft()
                 pending, self._pending = self._pending, {}
                 debug = self._values['publish_debug_image']
+                if pending:
+                    # the solver must not run during a reconfiguration: let it finish what it
+                    # has (a window of the old settings), then change both halves at once
+                    while (self._observed is not None or self._solving) and \
+                            not self._stop.is_set():
+                        self._solve_wake.wait(0.2)
             try:
                 if pending:
                     self._pipeline.reconfigure(**pending)
-                self._process(*item, debug=debug)
+                self._observe(*item, debug=debug)
             except Exception as exc:  # noqa: B902 (the worker must survive anything)
-                self.stats['errors'] += 1
+                self._count('errors')
                 if self._stop.is_set() or not self.context.ok():
                     return
                 self._warn('error', f'frame failed: {type(exc).__name__}: {exc}')
 
-    def _process(self, msg: Image, camera: Optional[CameraModel],
+    def _count(self, key: str) -> None:
+        with self._lock:
+            self.stats[key] += 1
+
+    def _observe(self, msg: Image, camera: Optional[CameraModel],
                  camera_size: Optional[Tuple[int, int]], debug: bool) -> None:
         try:
             gray = image_msg_to_gray(msg, max_pixels=self._values['max_pixels'])
         except ValueError as exc:
-            self.stats['skipped'] += 1
+            self._count('skipped')
             self._warn('image', f'bad image on {self.resolve_topic_name("image")}: {exc}; '
                        'frame skipped')
             return
@@ -333,22 +369,71 @@ class MlofcNode(Node):
                        f'images but the image is {size[0]}x{size[1]}; ignoring camera_info')
             camera = None
         try:
-            result = self._pipeline.process(gray, stamp_to_seconds(msg.header.stamp), camera)
+            obs = self._pipeline.observe(gray, stamp_to_seconds(msg.header.stamp), camera)
         except ValueError as exc:
-            self.stats['skipped'] += 1
+            self._count('skipped')
             self._warn('input', f'{exc}; frame skipped')
             return
+        if obs.skipped:
+            self._count('skipped')
+            self._warn('pipeline', '; '.join(obs.problems))
+            return
+        with self._lock:
+            # a fast solver runs here, in turn with the tracking: handing every frame over to
+            # the solver worker would make two Python threads contend for the GIL (measured:
+            # 60 Hz no longer kept up with); a slow one (general) runs in its own worker
+            inline = (self._observed is None and not self._solving
+                      and self._last_solve_s < INLINE_SOLVE_S
+                      and self._pipeline.params['method'] not in SLOW_METHODS)
+            if inline:
+                self._solving = True
+            else:
+                if self._observed is not None:
+                    # the solver is behind: the newer window replaces the unsolved one
+                    obs = obs.replacing(self._observed[1])
+                    self.stats['dropped'] += 1
+                    self.stats['unsolved'] += 1
+                self._observed = (msg.header, obs, debug)
+                self._solve_wake.notify_all()
+        if inline:
+            self._solve_guarded(msg.header, obs, debug)
+
+    def _run_solver(self) -> None:
+        """Solver worker: solve the newest observation and publish its frame's outputs."""
+        while not self._stop.is_set():
+            with self._lock:
+                while self._observed is None and not self._stop.is_set():
+                    self._solve_wake.wait(0.2)
+                if self._stop.is_set():
+                    return
+                (header, obs, debug), self._observed = self._observed, None
+                self._solving = True
+            self._solve_guarded(header, obs, debug)
+
+    def _solve_guarded(self, header: Any, obs: Observation, debug: bool) -> None:
+        """Solve and publish (``_solving`` set by the caller); count and warn on failure."""
+        try:
+            self._solve(header, obs, debug)
+        except Exception as exc:  # noqa: B902 (the workers must survive anything)
+            self._count('errors')
+            if not self._stop.is_set() and self.context.ok():
+                self._warn('error', f'frame failed: {type(exc).__name__}: {exc}')
+        finally:
+            with self._lock:
+                self._solving = False
+                self._solve_wake.notify_all()
+
+    def _solve(self, header: Any, obs: Observation, debug: bool) -> None:
+        t = time.monotonic()
+        result = self._pipeline.solve(obs)
+        self._last_solve_s = time.monotonic() - t
         if result.problem:
             self._warn('pipeline', result.problem)
-        if result.skipped:
-            self.stats['skipped'] += 1
-            return
         self.last_result = result           # before publishing: a subscriber may look at it
-        self._publish(msg, gray, result, debug)
-        self.stats['processed'] += 1
+        self._publish(header, obs.gray, result, debug)
+        self._count('processed')
 
-    def _publish(self, msg: Image, gray: Any, r: FrameResult, debug: bool) -> None:
-        header = msg.header
+    def _publish(self, header: Any, gray: Any, r: FrameResult, debug: bool) -> None:
         self._seg_pub.publish(segments_msg(header, r.segments, r.track_ids, r.labels,
                                            r.residuals))
         with self._pub_lock:
@@ -366,17 +451,19 @@ class MlofcNode(Node):
     # --- lifecycle -----------------------------------------------------------------------
 
     def pending_frames(self) -> int:
-        """Frames waiting in the queue."""
+        """Frames not answered yet: waiting in the queue, for the solver, or being solved."""
         with self._lock:
-            return len(self._queue)
+            return len(self._queue) + (self._observed is not None) + self._solving
 
     def destroy_node(self) -> None:
         """Stop the worker, then destroy the node."""
         self._stop.set()
         with self._lock:
             self._wake.notify_all()
-        if self._worker.is_alive() and threading.current_thread() is not self._worker:
-            self._worker.join(timeout=10.0)
+            self._solve_wake.notify_all()
+        for worker in (self._worker, self._solver):
+            if worker.is_alive() and threading.current_thread() is not worker:
+                worker.join(timeout=10.0)
         super().destroy_node()
 
 

@@ -153,7 +153,8 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               'Always publish ~/debug_image (it is also published whenever it has subscribers).',
               scope='node'),
     ParamSpec('queue_size', int, 2,
-              'Frames waiting for the worker; when full, the stalest frame is dropped.',
+              'Images waiting for the tracking worker; when full, the stalest is dropped '
+              '(the solver takes the newest tracked frame, see the README).',
               range=(1, 100), scope='node'),
     ParamSpec('warn_period', float, 5.0,
               'Minimum seconds between two warnings about the same kind of bad input.',

@@ -203,6 +203,69 @@ def test_in_process_two_boxes_one_cloud_per_image_and_accuracy(ros):
         h.close(node)
 
 
+@pytest.mark.slow
+def test_in_process_slow_solver_tracks_every_frame_and_solves_the_newest(ros):
+    """A solver slower than the camera (as method general is): every frame is still tracked,
+    the solver takes the newest window, the frames it had no time for are counted."""
+    seq = two_box_sequence(24)
+    node = MlofcNode(namespace='/slow', parameter_overrides=[
+        Parameter('num_bodies', value=3), Parameter('queue_size', value=30)])
+    pipe, observed = node._pipeline, []
+    observe, solve = pipe.observe, pipe.solve
+
+    def counting_observe(*args, **kwargs):
+        obs = observe(*args, **kwargs)
+        observed.append(obs.stamp)
+        return obs
+
+    def slow_solve(obs):
+        time.sleep(0.12)               # ~4 frame intervals at 30 Hz
+        return solve(obs)
+    pipe.observe, pipe.solve = counting_observe, slow_solve
+    h = Harness(node)
+    try:
+        clouds = h.collect(PointCloud2, '/slow/mlofc/segments')
+        twists = {i: h.collect(TwistWithCovarianceStamped, f'/slow/mlofc/body_{i}/twist')
+                  for i in range(3)}
+        pub, cam_pub = h.camera_publishers('/slow')
+        for img, t in zip(seq.frames, seq.stamps):
+            cam_pub.publish(camera_info_msg(seq.camera, (640, 480), t))
+            pub.publish(image_msg(img, t))
+            time.sleep(1 / 30)
+        assert h.wait(lambda: node.stats['received'] > 0 and node.pending_frames() == 0
+                      and len(clouds) == node.stats['processed'], 30.0)
+        time.sleep(0.2)
+        s = dict(node.stats)
+        print('slow solver, 24 frames at 30 Hz:', s)
+        assert s['processed'] + s['dropped'] + s['skipped'] + s['errors'] == s['received']
+        assert s['errors'] == 0 and s['skipped'] == 0
+        # the tracker saw every frame that arrived; only the solver skipped some
+        assert len(observed) == s['received'] and s['dropped'] == s['unsolved'] > 0
+        assert len(clouds) == s['processed'] < s['received']
+        stamps = [stamp_of(c) for c in clouds]
+        assert stamps == sorted(set(stamps)) and stamps[-1] == round(observed[-1], 6)
+        # the solved frames are segmented as well as when every frame is solved
+        index = {round(t, 6): i for i, t in enumerate(seq.stamps)}
+        solved = [index[t] for t in stamps]
+        by_stamp = {i: {stamp_of(m): parse_twist_msg(m)[0] for m in twists[i]} for i in twists}
+        results = []
+        for cloud in clouds:
+            segs, _, labels, _ = parse_segments_msg(cloud)
+            w = np.array([by_stamp[i].get(stamp_of(cloud), np.full(3, np.nan))
+                          for i in range(3)])
+            results.append(SimpleNamespace(segments=segs, labels=labels.astype(int),
+                                           angular_velocities=w))
+        late = [k for k, f in enumerate(solved) if f >= 4]
+        sub = SimpleNamespace(truth=[seq.truth[solved[k]] for k in late],
+                              angular_velocities=seq.angular_velocities)
+        ev = evaluate([results[k] for k in late], sub, first_frame=0)
+        print('slow solver, solved frames', solved, {k: round(v, 4) for k, v in ev.items()})
+        assert ev['wrong'] <= GOAL_MISCLASSIFIED, ev
+        assert ev['omega_error'] <= GOAL_OMEGA_ERROR, ev
+    finally:
+        h.close(node)
+
+
 def test_in_process_bad_input_queue_drops_and_parameter_changes(ros):
     seq = small_sequence()
     node = MlofcNode(namespace='/robust', parameter_overrides=[

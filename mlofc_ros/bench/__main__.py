@@ -23,6 +23,7 @@ BENCHMARKS = {
     'accuracy': 'robust solver vs floor, outliers, multi-frame, model selection, solver speed',
     'pipeline': 'per-stage timings of the whole per-frame pipeline vs LSD alone',
     'ros': 'highest image rate the running node keeps up with, and its latency',
+    'live': 'spinning boxes published to the running node in real time (method general)',
     'soak': 'resident memory over a long run of the pipeline (10,000 frames)',
     'spinning': 'boxes spinning about their own centres through the pipeline: robust vs general',
     'tradeoff': 'speed vs tracking quality over detector_scale, detect_every, bridge_crossings',

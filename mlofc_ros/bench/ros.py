@@ -79,20 +79,33 @@ def child_main(stats_path: str, ros_args: Sequence[str]) -> int:
                                          time=time.time(), proc_wall=proc_wall,
                                          proc_cpu=proc_cpu))
 
-    def timed(process: Any) -> Any:
+    observe_cpu: Dict[float, float] = {}      # stamp -> CPU ms of the tracking worker
+
+    def timed_observe(observe: Any) -> Any:
         def wrapper(*a: Any, **kw: Any) -> Any:
+            c = time.thread_time()
+            obs = observe(*a, **kw)
+            observe_cpu[obs.stamp] = 1e3 * (time.thread_time() - c)
+            return obs
+        return wrapper
+
+    def timed_solve(solve: Any) -> Any:
+        # a published frame's process time: its observe (tracking worker) + its solve
+        def wrapper(obs: Any) -> Any:
             t, c = time.perf_counter(), time.thread_time()
             try:
-                return process(*a, **kw)
+                return solve(obs)
             finally:
-                proc_wall.append(1e3 * (time.perf_counter() - t))
-                proc_cpu.append(1e3 * (time.thread_time() - c))
+                proc_wall.append(obs.elapsed_ms + 1e3 * (time.perf_counter() - t))
+                for k in [k for k in list(observe_cpu) if k < obs.stamp]:
+                    observe_cpu.pop(k, None)          # frames tracked, not solved
+                proc_cpu.append(observe_cpu.pop(obs.stamp, math.nan)
+                                + 1e3 * (time.thread_time() - c))
         return wrapper
     try:
         node = MlofcNode()
-        pipe = getattr(node, '_pipeline', None)     # time Pipeline.process inside the node
-        if pipe is not None:
-            pipe.process = timed(pipe.process)
+        pipe = node._pipeline        # time Pipeline.observe + solve inside the node
+        pipe.observe, pipe.solve = timed_observe(pipe.observe), timed_solve(pipe.solve)
         node.create_timer(0.1, dump)
         dump()
         rclpy.spin(node)
@@ -441,16 +454,17 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
     wall_med = float(np.nanmedian(wall_ms)) if np.isfinite(wall_ms).any() else math.nan
     lines += [f'- Highest answer rate seen: {fastest:.1f} segments messages/s (throughput '
               'limit: above it the node drops the stalest queued frames).',
-              f'- Inside the node `Pipeline.process` took {wall_med:.0f} ms wall but '
-              f'{cpu_med:.0f} ms of worker-thread CPU (medians over the rates): the node waited '
-              f'for a core (or the GIL) {"most" if wall_med > 2 * cpu_med else "part"} of the '
-              'time on this shared machine. Were it alone on a core, '
+              f'- Inside the node a published frame took {wall_med:.0f} ms wall but '
+              f'{cpu_med:.0f} ms of worker-thread CPU (`Pipeline.observe` in the tracking '
+              'worker + `Pipeline.solve` in the solver worker; medians over the rates): the '
+              f'node waited for a core (or the GIL) {"most" if wall_med > 2 * cpu_med else "part"}'
+              ' of the time on this shared machine. Were it alone on a core, '
               f'the CPU time alone would allow about {1e3 / cpu_med:.0f} Hz (an estimate, not '
               'measured here).', '',
               '## Per rate', '',
               common.markdown_table(
                   ['rate Hz', 'achieved Hz', 'published', 'node received', 'answered',
-                   'dropped (node queue)', 'lost before node', 'skipped', 'answers/s',
+                   'dropped (node)', 'lost before node', 'skipped', 'answers/s',
                    'latency median ms', 'latency p99 ms', 'latency max ms',
                    'process wall ms', 'process CPU ms', 'process wall max ms', 'kept up'],
                   [[r['rate'], r['achieved'], r['published'], r['received'], r['answered'],
@@ -459,19 +473,22 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
                     r['proc_max'], 'yes' if kept_up(r) else 'no']
                    for r in rows]),
               "- published: images sent; node received / dropped / skipped: the node's own "
-              'counters (`MlofcNode.stats`) over the rate; lost before node = published - '
-              'received (best-effort transport); answered: `~/segments` messages received '
-              'for those stamps.',
+              'counters (`MlofcNode.stats`) over the rate (dropped: by its bounded queue, or '
+              'tracked but replaced by a newer frame before the solver was free); lost before '
+              'node = published - received (best-effort transport); answered: `~/segments` '
+              'messages received for those stamps.',
               '- latency: wall time at `~/segments` reception - image stamp (= wall time at '
               "publication), over the answered frames; it includes waiting in the node's "
-              'queue, decode, `Pipeline.process`, packing and DDS both ways.',
-              '- process wall / CPU ms: median over the rate of `Pipeline.process` inside the '
-              "node, wall time and the worker thread's CPU time (`time.thread_time`); wall "
+              'queue, decode, tracking, waiting for the solver, solving, packing and DDS both '
+              'ways.',
+              "- process wall / CPU ms: median over the rate of a published frame's "
+              '`Pipeline.observe` (tracking worker) + `Pipeline.solve` (solver worker) inside '
+              "the node, wall time and the two workers' CPU time (`time.thread_time`); wall "
               'well above CPU means the node waited for a core (shared machine) or the GIL. '
-              'When the node drops most frames, the frames it does process are farther apart: '
-              'larger motion between them makes tracking and solving costlier per frame. '
-              '`process wall max`: the slowest call (a latency max far above it was spent '
-              'outside `Pipeline.process`: queue, transport, scheduling).', '',
+              'When the node drops frames before tracking, the frames it does track are '
+              'farther apart: larger motion between them makes tracking and solving costlier '
+              'per frame. `process wall max`: the slowest frame (a latency max far above it '
+              'was spent outside the two calls: queues, transport, scheduling).', '',
               '![drops and latency](ros.png)', '']
     return '\n'.join(lines)
 
