@@ -11,7 +11,7 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Smoke runs of ``python -m mlofc_ros.bench pipeline|ros|soak --quick``: each writes a report."""
+"""Smoke runs of ``python -m mlofc_ros.bench pipeline|ros|live|soak --quick``: reports."""
 import os
 import pathlib
 import tempfile
@@ -70,6 +70,21 @@ def test_ros_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert len(rows) == 2
     assert int(rows[0].split('|')[5]) >= 1
     assert (tmp_path / 'ros.png').is_file()
+
+
+def test_live_quick_writes_report(tmp_path: pathlib.Path) -> None:
+    pytest.importorskip('rclpy')
+    from mlofc_ros.bench import live
+    os.environ.setdefault('HOME', tempfile.gettempdir())
+    assert live.main(['--quick', '--out', str(tmp_path)]) == 0
+    text = (tmp_path / 'live.md').read_text()
+    assert '## Over the seeds' in text and '## Every run' in text
+    row = [ln for ln in text.splitlines() if ln.startswith('| own2 | 0 | 10 |')]
+    assert len(row) == 1
+    published, answered, unsolved, dropped = (int(x) for x in row[0].split('|')[4:8])
+    # every frame that reached the node was tracked; the solver answered some of them
+    assert published == 15 and answered >= 1 and dropped == 0
+    assert answered + unsolved <= published
 
 
 def test_ros_headline_names_the_limit_or_says_it_is_above() -> None:

@@ -58,8 +58,13 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--frames', type=int, default=300, help='frames per scene (300: 10 s)')
     ap.add_argument('--startup-timeout', type=float, default=90.0)
     ap.add_argument('--drain-timeout', type=float, default=120.0)
+    ap.add_argument('--quick', action='store_true',
+                    help='smoke run: own2, seed 0, 10 Hz, 15 frames, window 5')
     ap.add_argument('--out', default=None, help='output folder (default docs/results)')
     args = ap.parse_args(list(argv))
+    if args.quick:
+        args.scenes, args.seeds, args.rates, args.frames, args.window = \
+            'own2', '0', '10', 15, 5
     args.scene_list = [s for s in args.scenes.split(',') if s]
     unknown = [s for s in args.scene_list if s not in spinning.SCENES]
     if unknown:
@@ -139,48 +144,23 @@ def answers(bench: LiveBench, stamps: Sequence[int], n_bodies: int) -> List[Any]
 def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
             ) -> Dict[str, Any]:
     """One fresh node, one scene published at ``rate``; counts and scores."""
-    from mlofc_ros.demo import fresh_domain_id, NodeProcess
+    from mlofc_ros.demo import fresh_domain_id
     n_bodies = len(seq.body_names)
     domain = fresh_domain_id()
     stats_path = work / f'stats_{domain}.json'
-    command = [sys.executable, '-m', 'mlofc_ros.bench.ros', '--child', str(stats_path),
-               '--ros-args', '-r', f'__node:={bench_ros.NODE_NAME}',
-               '-r', f'image:={bench_ros.IMAGE_TOPIC}', '-r',
-               f'camera_info:={bench_ros.INFO_TOPIC}', '-p', f'num_bodies:={n_bodies}',
-               '-p', f'method:={args.method}', '-p', f'window:={args.window}',
-               '-p', 'queue_size:=2']
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-               HOME=os.environ.get('HOME', tempfile.gettempdir()))
-    saved = {k: os.environ.get(k) for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
-                                            'HOME')}
-    os.environ.update({k: env[k] for k in saved})
-    bench = None
-    try:
-        with NodeProcess(command, env, work / f'node_{domain}.log') as proc:
-            bench = LiveBench(args, domain, n_bodies)
-            bench.make_messages(seq.frames, seq.camera)
-            up = bench_ros._wait(lambda: (bench.image_pub.get_subscription_count() > 0
-                                          and bench.node.count_publishers(bench_ros.SEG_TOPIC)
-                                          > 0 and bench_ros.read_stats(stats_path) is not None)
-                                 or not proc.alive(), args.startup_timeout, 0.1)
-            if not up or not proc.alive():
-                raise bench_ros.BenchError(f'the node did not come up:\n{proc.log_tail()}')
-            time.sleep(0.5)
-            base = time.time()
-            stamps = bench.publish_sequence([base + t for t in seq.stamps], rate)
-            bench_ros._drain(bench, stats_path, proc, args.drain_timeout)
-            time.sleep(0.3)
-            stats = bench_ros.read_stats(stats_path) or {}
-            got = answers(bench, stamps, n_bodies)
-    finally:
-        if bench is not None:
-            bench.close()
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+    ros_args = ['-p', f'num_bodies:={n_bodies}', '-p', f'method:={args.method}',
+                '-p', f'window:={args.window}', '-p', 'queue_size:=2']
+    with bench_ros.running_node(ros_args, domain, stats_path, work / f'node_{domain}.log',
+                                lambda: LiveBench(args, domain, n_bodies),
+                                args.startup_timeout) as (bench, proc, _, _):
+        bench.make_messages(seq.frames, seq.camera)
+        time.sleep(0.5)
+        base = time.time()
+        stamps = bench.publish_sequence([base + t for t in seq.stamps], rate)
+        bench_ros._drain(bench, stats_path, proc, args.drain_timeout)
+        time.sleep(0.3)
+        stats = bench_ros.read_stats(stats_path) or {}
+        got = answers(bench, stamps, n_bodies)
     first = min(args.window - 1, len(stamps) - 1)
     scored = [f for f in range(first, len(stamps)) if got[f] is not None]
     sub = SimpleNamespace(body_names=seq.body_names, truth=[seq.truth[f] for f in scored],

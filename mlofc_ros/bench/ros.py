@@ -30,6 +30,7 @@ with when every published frame is answered and the node dropped none.
 Run ``python -m mlofc_ros.bench ros``; writes ``ros.md`` and ``ros.png``.
 """
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -38,7 +39,7 @@ import sys
 import tempfile
 import threading
 import time
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -267,7 +268,7 @@ def _wait(cond: Any, timeout: float, step: float = 0.05) -> bool:
 
 def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
     """Start the node, sweep the rates; returns the per-rate rows and run facts."""
-    from mlofc_ros.demo import fresh_domain_id, NodeProcess
+    from mlofc_ros.demo import fresh_domain_id
     from mlofc_ros.render import render_sequence
 
     load = os.getloadavg()
@@ -278,11 +279,43 @@ def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
     seq = render_sequence(args.boxes, min(args.frames, 120), size=args.wh,
                           motion='camera_centre', background=True, noise_sigma=2.0, seed=0)
     stats_path = work / 'node_stats.json'
+    ros_args = ['-p', f'num_bodies:={args.boxes + 1}']
+    if args.queue_size is not None:
+        ros_args += ['-p', f'queue_size:={args.queue_size}']
+    rows: List[Dict[str, Any]] = []
+    with running_node(ros_args, domain, stats_path, work / 'node.log',
+                      lambda: Bench(args, domain), args.startup_timeout) as (bench, proc, startup,
+                                                                             command):
+        common.eprint(f'ros: node up after {startup:.1f} s (ROS_DOMAIN_ID={domain})')
+        bench.make_messages(seq.frames, seq.camera)
+        # warm-up (imports, first window) at a rate the node surely keeps up with
+        bench.publish_at(2.0, 4)
+        _drain(bench, stats_path, proc, args.drain_timeout)
+        for rate in args.rate_list:
+            rows.append(_one_rate(bench, stats_path, proc, rate, args))
+            r = rows[-1]
+            common.eprint(f'ros: {rate:g} Hz: {r["answered"]}/{r["published"]} answered, '
+                          f'{r["dropped"]} dropped, latency median {r["lat_median"]:.0f} '
+                          f'ms, p99 {r["lat_p99"]:.0f} ms')
+    return {'rows': rows, 'domain': domain, 'startup': startup, 'load': load, 'code': code,
+            'command': command, 'seq': seq}
+
+
+@contextlib.contextmanager
+def running_node(ros_args: Sequence[str], domain: int, stats_path: pathlib.Path,
+                 log_path: pathlib.Path, make_bench: Callable[[], Bench],
+                 startup_timeout: float) -> Iterator[Tuple[Bench, Any, float, List[str]]]:
+    """Run the node (``--child``, writing ``stats_path``) on ``domain`` with ``ros_args``.
+
+    Yields ``(bench, process, startup seconds, command)`` once the node subscribes to the
+    image topic and publishes ``~/segments``; ``make_bench`` builds the publishing side (in
+    this process's environment set to the domain). Raises :class:`BenchError` when the node
+    does not come up in ``startup_timeout`` s. The environment is restored afterwards.
+    """
+    from mlofc_ros.demo import NodeProcess
     command = [sys.executable, '-m', 'mlofc_ros.bench.ros', '--child', str(stats_path),
                '--ros-args', '-r', f'__node:={NODE_NAME}', '-r', f'image:={IMAGE_TOPIC}',
-               '-r', f'camera_info:={INFO_TOPIC}', '-p', f'num_bodies:={args.boxes + 1}']
-    if args.queue_size is not None:
-        command += ['-p', f'queue_size:={args.queue_size}']
+               '-r', f'camera_info:={INFO_TOPIC}', *ros_args]
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
                ROS_AUTOMATIC_DISCOVERY_RANGE=os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE',
                                                             'LOCALHOST'),
@@ -290,33 +323,19 @@ def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
     saved = {k: os.environ.get(k) for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
                                             'HOME')}
     os.environ.update({k: env[k] for k in saved})
-    rows: List[Dict[str, Any]] = []
     bench = None
     try:
-        with NodeProcess(command, env, work / 'node.log') as proc:
-            bench = Bench(args, domain)
-            bench.make_messages(seq.frames, seq.camera)
+        with NodeProcess(command, env, log_path) as proc:
+            bench = make_bench()
             t0 = time.monotonic()
             up = _wait(lambda: (bench.image_pub.get_subscription_count() > 0
                                 and bench.node.count_publishers(SEG_TOPIC) > 0
                                 and read_stats(stats_path) is not None)
-                       or not proc.alive(), args.startup_timeout, 0.1)
+                       or not proc.alive(), startup_timeout, 0.1)
             if not up or not proc.alive():
-                raise BenchError(f'the node did not come up within {args.startup_timeout:g} s '
+                raise BenchError(f'the node did not come up within {startup_timeout:g} s '
                                  f'(ROS_DOMAIN_ID={domain}):\n{proc.log_tail()}')
-            startup = time.monotonic() - t0
-            common.eprint(f'ros: node up after {startup:.1f} s (ROS_DOMAIN_ID={domain})')
-            # warm-up (imports, first window) at a rate the node surely keeps up with
-            bench.publish_at(2.0, 4)
-            _drain(bench, stats_path, proc, args.drain_timeout)
-            for rate in args.rate_list:
-                rows.append(_one_rate(bench, stats_path, proc, rate, args))
-                r = rows[-1]
-                common.eprint(f'ros: {rate:g} Hz: {r["answered"]}/{r["published"]} answered, '
-                              f'{r["dropped"]} dropped, latency median {r["lat_median"]:.0f} '
-                              f'ms, p99 {r["lat_p99"]:.0f} ms')
-        return {'rows': rows, 'domain': domain, 'startup': startup, 'load': load, 'code': code,
-                'command': command, 'seq': seq}
+            yield bench, proc, time.monotonic() - t0, command
     finally:
         if bench is not None:
             bench.close()
