@@ -626,7 +626,10 @@ class Pipeline:
             residuals = _lookup(track_ids, win_ids,
                                 np.asarray(res.residuals, dtype=np.float32), np.nan)
             focal = float(res.focal_length)
-            if intrinsics is None and math.isfinite(focal) and focal > 0:
+            # not from an image of another size than the tracker's now: solved late (the
+            # node's solver worker) it would fix f for the new size
+            if (intrinsics is None and math.isfinite(focal) and focal > 0
+                    and size == self._image_size):
                 self._focal_samples.append(focal)
                 if len(self._focal_samples) >= FOCAL_SAMPLES:
                     self._focal_fixed = float(np.median(self._focal_samples))

@@ -506,6 +506,26 @@ def test_estimated_focal_length_is_fixed_after_warm_up():
     assert p._intrinsics(None, (320, 240)) == (None, None)      # forgotten on reset
 
 
+def test_a_focal_length_estimated_before_a_size_change_is_not_kept():
+    # the node solves an observation while later ones are tracked: one of the old image size
+    # solved after a size change must not fix f for the new size
+    seq = render_sequence(n_boxes=2, n_frames=22, size=(320, 240), motion='camera_centre',
+                          background=True, noise_sigma=1.0, seed=3)
+    p = Pipeline(num_bodies=3, window=4)
+    i = 0
+    while len(p._focal_samples) < FOCAL_SAMPLES - 1:
+        p.process(seq.frames[i], seq.stamps[i])
+        i += 1
+    old = p.observe(seq.frames[i], seq.stamps[i])                 # solved late, below
+    cropped = [np.ascontiguousarray(f[:220, :300]) for f in seq.frames[i + 1:i + 3]]
+    first_new = p.observe(cropped[0], seq.stamps[i + 1])
+    assert 'size changed' in first_new.problems[0] and first_new.intrinsics is None
+    p.solve(old)
+    assert p.observe(cropped[1], seq.stamps[i + 2]).intrinsics is None
+    p.solve(first_new.replacing(old))
+    assert not p._focal_samples and p._focal_fixed is None
+
+
 def test_labels_are_stable_over_time():
     """Goal: < 1% of segment-frames change label on a steady sequence once the window is full."""
     seq = two_box_sequence(20)
