@@ -99,3 +99,15 @@ def test_ros_headline_names_the_limit_or_says_it_is_above() -> None:
     assert '**10 Hz**' in text and 'At 20 Hz it no longer does' in text
     text = ros.rate_headline([row(5, 0), row(10, 0)])
     assert '**10 Hz**' in text and 'the limit lies above it' in text
+
+
+def test_covariance_quick_writes_report(tmp_path: pathlib.Path) -> None:
+    from mlofc_ros.bench import covariance
+    assert covariance.main(['--quick', '--out', str(tmp_path)]) == 0
+    text = (tmp_path / 'covariance.md').read_text()
+    rows = {ln.split('|')[1].strip(): ln.split('|') for ln in text.splitlines()
+            if ln.startswith('| own2 general') or ln.startswith('| cam2+bg robust')}
+    assert set(rows) == {'own2 general', 'cam2+bg robust'}
+    # the rotation-only model on its own scene: every box scored, NEES a plain number
+    robust = rows['cam2+bg robust']
+    assert int(robust[10]) == 2 and float(robust[11]) > 0

@@ -264,3 +264,23 @@ def test_position_costs_favour_compact_bodies():
 def cost_of(cost, lab):
     """Sum of each track's cost under its label."""
     return float(cost[np.arange(lab.size), lab].sum())
+
+
+def test_a_body_fitted_worse_than_the_measured_noise_gets_a_wider_covariance(monkeypatch):
+    # the measured noise level is one for all lines; a body whose residuals exceed it (model
+    # error) must not publish a covariance that claims that level
+    import mlofc_ros.solver.general as general
+    tracks, w, t = spinning_lines(n_lines=30, n_frames=8, seed=5)
+    noise = 0.3
+    rng = np.random.default_rng(0)
+    obs = LineObservations(tracks + rng.normal(scale=noise, size=tracks.shape), (F, F, C, C))
+    idx = np.arange(tracks.shape[0])
+    w_fit, t_fit, _ = general.polish_body(obs, idx, w, t, 20, noise ** 2)
+
+    def trace(sigma2):
+        return np.trace(general.body_covariance(obs, idx, w_fit, t_fit, sigma2, marginal=True))
+    at_noise = trace(noise ** 2)
+    assert 0.5 < trace(noise ** 2 / 9) / at_noise < 2.0         # noise underestimated 9x
+    assert trace(4 * noise ** 2) / at_noise > 2.0                # overestimated: not shrunk
+    monkeypatch.setattr(general, 'COVARIANCE_FIT_SCALE', False)
+    assert trace(noise ** 2 / 9) / at_noise < 0.3

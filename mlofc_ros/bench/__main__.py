@@ -21,6 +21,7 @@ BENCHMARKS = {
     'frontend': 'line detection and tracking on rendered and real sequences',
     'hopkins': 'real line tracks built from Hopkins155 point tracks',
     'accuracy': 'robust solver vs floor, outliers, multi-frame, model selection, solver speed',
+    'covariance': 'NEES of the published angular-velocity covariance on rendered scenes',
     'pipeline': 'per-stage timings of the whole per-frame pipeline vs LSD alone',
     'ros': 'highest image rate the running node keeps up with, and its latency',
     'live': 'spinning boxes published to the running node in real time (method general)',
