@@ -97,11 +97,14 @@ def run_one(item: Tuple[Tuple[str, str, str, int, bool], int, int]) -> Dict[str,
     (label, scene, method, window, scaled), seed, frames = item
     from mlofc_ros.render import render_sequence
     from mlofc_ros.solver import general
-    general.COVARIANCE_FIT_SCALE = scaled
     motion, boxes, background = spinning.SCENES[scene]
     seq = render_sequence(n_boxes=boxes, n_frames=frames, size=(640, 480), motion=motion,
                           background=background, seed=seed)
-    outs = spinning.run_pipeline(seq, method, window)
+    default, general.COVARIANCE_FIT_SCALE = general.COVARIANCE_FIT_SCALE, scaled
+    try:
+        outs = spinning.run_pipeline(seq, method, window)
+    finally:
+        general.COVARIANCE_FIT_SCALE = default     # --jobs 1 runs in this process
     return {'label': label, 'scaled': scaled, 'seed': seed,
             'boxes': box_nees(seq, outs, min(window - 1, frames - 1))}
 
