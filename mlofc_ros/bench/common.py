@@ -54,6 +54,15 @@ def results_dir(out: Optional[str] = None) -> pathlib.Path:
     return path
 
 
+def write_report(out: Optional[str], name: str, text: str) -> pathlib.Path:
+    """Write ``text`` to ``name`` in :func:`results_dir` (``out``), echo it; return the path."""
+    path = results_dir(out) / name
+    path.write_text(text)
+    print(text)
+    eprint(f'wrote {path}')
+    return path
+
+
 def command_line(name: str, argv: Sequence[str]) -> str:
     """Shell command that reruns benchmark ``name`` with ``argv`` (for the report)."""
     return ' '.join(['python', '-m', 'mlofc_ros.bench', name, *map(shlex.quote, argv)])

@@ -159,10 +159,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         '',
         __doc__.split('\n\n', 1)[1].strip(),
         ''])
-    out = common.results_dir(args.out)
-    (out / 'covariance.md').write_text(text)
-    print(text)
-    common.eprint(f'wrote {out / "covariance.md"}')
+    common.write_report(args.out, 'covariance.md', text)
     return 0
 
 

@@ -257,10 +257,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         '',
         __doc__.split('\n\n', 1)[1].strip(),
         ''])
-    out = common.results_dir(args.out)
-    (out / 'live.md').write_text(text)
-    print(text)
-    common.eprint(f'wrote {out / "live.md"}')
+    common.write_report(args.out, 'live.md', text)
     return 0
 
 
