@@ -104,9 +104,19 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               'Shortest line segment detected and tracked, in pixels.',
               range=(2.0, 10000.0)),
     ParamSpec('detect_every', int, 3,
-              'Run the line detector on every n-th frame; tracks are carried between. Larger '
-              'values cut the mean cost per frame (the detector is most of a detection frame) '
-              'but new edges get a track later.',
+              'Run the line detector on every n-th frame (the shortest interval of detection '
+              'on demand, see detect_every_max); tracks are carried between. Larger values '
+              'cut the mean cost per frame (the detector is most of a detection frame) but '
+              'new edges get a track later.',
+              range=(1, 100)),
+    ParamSpec('detect_every_max', int, 12,
+              'Detection on demand: after a detection that finds almost nothing new (new '
+              'segments <= 3% of the tracks) the interval between detections doubles, up to '
+              'this many frames; the detector runs at once (from detect_every frames on) when '
+              'edges show that no track explains or more than 5% of the tracks are lost, and '
+              'a detection that finds more brings the interval back to detect_every. A static '
+              'camera watching a few moving objects then pays for the detector rarely. '
+              '<= detect_every: a fixed rate.',
               range=(1, 100)),
     ParamSpec('detector_scale', float, 0.8,
               'The line detector runs on the image resized by this factor (area average). '

@@ -243,7 +243,8 @@ def make_detector(params: Mapping[str, Any]) -> LineDetector:
 def make_tracker(params: Mapping[str, Any]) -> LineTracker:
     """Build the line tracker (with :func:`make_detector`) the pipeline runs with ``params``."""
     return LineTracker(make_detector(params), min_length=float(params['min_segment_length']),
-                       detect_every=int(params['detect_every']))
+                       detect_every=int(params['detect_every']),
+                       detect_every_max=int(params['detect_every_max']))
 
 
 class Pipeline:
@@ -295,9 +296,9 @@ class Pipeline:
 
         ``window`` restarts the window; ``num_bodies`` restarts body numbering;
         ``min_segment_length`` restarts the tracker and the window; ``detect_every``,
-        ``detector_backend``, ``detector_scale`` and ``bridge_crossings`` change only the
-        detection (tracks carry on). Raises like the constructor, changing nothing when any
-        value is invalid.
+        ``detect_every_max``, ``detector_backend``, ``detector_scale`` and
+        ``bridge_crossings`` change only the detection (tracks carry on). Raises like the
+        constructor, changing nothing when any value is invalid.
         """
         unknown = sorted(set(kwargs) - set(_params.PARAMS))
         if unknown:
@@ -312,6 +313,7 @@ class Pipeline:
         else:
             # detection settings, not state: the tracks carry on
             self._tracker.detect_every = int(self.params['detect_every'])
+            self._tracker.detect_every_max = int(self.params['detect_every_max'])
             if changed & {'detector_backend', 'detector_scale'}:
                 self._tracker.detector = make_detector(self.params)
             self._tracker.detector.bridge = bool(self.params['bridge_crossings'])

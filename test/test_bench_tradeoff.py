@@ -25,16 +25,25 @@ def test_make_tracker_follows_the_node_parameters() -> None:
              min_segment_length=30.0)
     tracker = make_tracker(p)
     assert tracker.detect_every == 5 and tracker.min_length == 30.0
+    assert tracker.detect_every_max == 12                       # on demand by default
     assert tracker.detector.scale == 0.5 and tracker.detector.bridge is False
     assert tracker.detector.min_length == 30.0 and tracker.detector.backend == 'lsd_resize'
 
 
 def test_settings_are_every_combination() -> None:
-    args = tradeoff.parse_args(['--scales', '1.0,0.5', '--every', '3', '--bridge', 'on,off'])
-    assert tradeoff.settings(args) == [(1.0, 3, True), (1.0, 3, False), (0.5, 3, True),
-                                       (0.5, 3, False)]
-    assert tradeoff.params_of((0.5, 3, False)) == {
-        'detector_scale': 0.5, 'detect_every': 3, 'bridge_crossings': False}
+    args = tradeoff.parse_args(['--scales', '1.0,0.5', '--every', '3', '--bridge', 'on,off',
+                                '--max', 'fixed'])
+    assert tradeoff.settings(args) == [(1.0, 3, True, 0), (1.0, 3, False, 0),
+                                       (0.5, 3, True, 0), (0.5, 3, False, 0)]
+    assert tradeoff.params_of((0.5, 3, False, 0)) == {
+        'detector_scale': 0.5, 'detect_every': 3, 'bridge_crossings': False,
+        'detect_every_max': 3}
+    # on demand: a maximum not above detect_every is the fixed rate, listed once
+    args = tradeoff.parse_args(['--scales', '0.8', '--every', '3,12', '--bridge', 'on'])
+    assert tradeoff.settings(args) == [(0.8, 3, True, 0), (0.8, 3, True, 12),
+                                       (0.8, 12, True, 0)]
+    assert tradeoff.setting_text((0.8, 3, True, 12)) == (
+        'detector_scale:=0.8 detect_every:=3 bridge_crossings:=true detect_every_max:=12')
 
 
 def test_front_keeps_settings_nothing_beats_on_both() -> None:
@@ -45,7 +54,8 @@ def test_front_keeps_settings_nothing_beats_on_both() -> None:
 
 def test_small_run_writes_report(tmp_path: pathlib.Path) -> None:
     assert 'tradeoff' in BENCHMARKS
-    argv = ['--scales', '0.5', '--every', '3,6', '--bridge', 'off', '--frames', '6',
+    argv = ['--scales', '0.5', '--every', '3,6', '--bridge', 'off', '--max', 'fixed',
+            '--frames', '6',
             '--seeds', '0', '--timing-frames', '8', '--out', str(tmp_path)]
     assert tradeoff.main(argv) == 0
     text = (tmp_path / 'tradeoff.md').read_text()

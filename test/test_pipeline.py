@@ -371,9 +371,11 @@ def test_constructor_and_reconfigure_validate_like_the_node():
     lengths = np.hypot(*(r.segments[:, 2:] - r.segments[:, :2]).T)
     assert np.all(lengths >= 30.0 - 1e-3)
     ids = set(r.track_ids.tolist())
-    p.reconfigure(detect_every=5)                                     # a schedule: no reset
+    assert p._tracker.detect_every_max == 12                           # the default
+    p.reconfigure(detect_every=5, detect_every_max=5)                 # a schedule: no reset
     r = p.process(seq.frames[7], seq.stamps[7], seq.camera)
     assert r.window_fill == 2 and p._tracker.detect_every == 5
+    assert p._tracker.detect_every_max == 5
     assert ids & set(r.track_ids.tolist())
     assert p._tracker.detector.bridge                                  # the default
     tracker = p._tracker

@@ -215,3 +215,64 @@ def test_crowded_parallel_births_wait_but_not_on_the_first_frame():
     assert len(tracker(3.0, first_empty=False).update(blank)[0]) == 3   # frame 0: all born
     with pytest.raises(ValueError, match='birth_clear_px'):
         LineTracker(birth_clear_px=-1.0)
+
+
+def _static_scene(new_bar=False, covered=False, seed=0):
+    """A static 400x400 scene of rectangles with fresh noise; optionally a new bar or a patch."""
+    import cv2
+    img = np.full((400, 400), 90, np.uint8)
+    for k, (x, y, w, h) in enumerate([(40, 40, 120, 80), (220, 60, 130, 100),
+                                      (60, 220, 100, 120), (230, 240, 110, 110)]):
+        cv2.rectangle(img, (x, y), (x + w, y + h), 150 + 20 * (k % 2), -1)
+    if new_bar:
+        cv2.rectangle(img, (175, 170, 50, 30), 230, -1)   # in the empty middle
+    if covered:
+        img[:200, :] = 90                                   # the two top rectangles vanish
+    noise = np.random.default_rng(seed).normal(0, 2, img.shape)
+    return np.clip(img + noise, 0, 255).astype(np.uint8)
+
+
+def test_detection_on_demand_waits_in_a_quiet_scene_and_reacts_to_news():
+    fixed, demand = LineTracker(detect_every_max=3), LineTracker()
+    assert demand.detect_every == 3 and demand.detect_every_max == 12     # the defaults
+    runs = {}
+    for name, tr in (('fixed', fixed), ('demand', demand)):
+        runs[name] = []
+        for f in range(30):
+            tr.update(_static_scene(seed=f))
+            runs[name].append(tr.last_timing['detected'])
+    assert sum(runs['fixed']) == 10                      # frames 0, 3, ..., 27
+    assert 4 <= sum(runs['demand']) <= 6                 # intervals 3, 6, 12, 12
+    assert runs['demand'][:4] == [1.0, 0.0, 0.0, 1.0]    # the base rate first
+    # a new edge, shown past the base interval, is detected at once, not at the grown one
+    f = 30
+    while not demand.last_timing['detected']:
+        demand.update(_static_scene(seed=f))
+        f += 1
+    for f in range(f, f + demand.detect_every + 1):
+        ids_before = set(demand.update(_static_scene(seed=f))[0].tolist())
+        assert not demand.last_timing['detected']
+    ids, seg = demand.update(_static_scene(new_bar=True, seed=f + 1))
+    assert demand.last_timing['detected']
+    born = [s for i, s in zip(ids, seg) if int(i) not in ids_before]
+    assert born, 'the new bar got no track'
+    mid = np.array([[(s[0] + s[2]) / 2, (s[1] + s[3]) / 2] for s in born])
+    assert np.all((np.abs(mid - (200, 185)) <= (30, 20)).all(axis=1))    # on the bar
+    # after news the interval is back to the base rate
+    assert demand._interval == demand.detect_every
+
+
+def test_detection_on_demand_runs_when_tracks_are_lost():
+    tr = LineTracker()
+    for f in range(40):                      # long enough to reach the longest interval
+        tr.update(_static_scene(seed=f))
+    assert tr._interval == tr.detect_every_max
+    detected = []
+    for f in range(40, 40 + tr.detect_every):
+        tr.update(_static_scene(covered=True, seed=f))
+        detected.append(tr.last_timing['detected'])
+    assert any(detected)                      # within the base interval
+    with pytest.raises(ValueError, match='detect_every_max'):
+        LineTracker(detect_every_max=0)
+    with pytest.raises(ValueError, match='quiet_births'):
+        LineTracker(quiet_births=-0.1)

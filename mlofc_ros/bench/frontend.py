@@ -504,6 +504,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--boxes', default='2,3', help='boxes per sequence, cycled over seeds')
     ap.add_argument('--detect-every', type=int, default=None,
                     help='LineTracker.detect_every (default: the tracker default)')
+    ap.add_argument('--detect-every-max', type=int, default=None,
+                    help='LineTracker.detect_every_max: longest detection interval in a quiet '
+                         'scene (default: the tracker default)')
     ap.add_argument('--backend', default=None,
                     help='tracker detector backend (lsd, lsd_resize, fld, edlines)')
     ap.add_argument('--scale', type=float, default=None, help='tracker detector scale')
@@ -527,6 +530,14 @@ def _nth(k: int) -> str:
     """Return the English ordinal of ``k`` (1st, 2nd, 3rd, 4th, ..., 11th, 12th, 21st)."""
     suffix = 'th' if 10 <= k % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th')
     return f'{k}{suffix}'
+
+
+def _schedule(tracker: LineTracker) -> str:
+    """Say when the tracker's detector runs (a fixed rate, or on demand)."""
+    if tracker.detect_every_max <= tracker.detect_every:
+        return f'every {_nth(tracker.detect_every)}'
+    return (f'on demand: every {_nth(tracker.detect_every)} frame up to every '
+            f'{_nth(tracker.detect_every_max)} while the scene is quiet')
 
 
 def _detector_table(rows: Sequence[Dict[str, object]]) -> str:
@@ -558,6 +569,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     kw: Dict[str, object] = {}
     if args.detect_every is not None:
         kw['detect_every'] = args.detect_every
+    if args.detect_every_max is not None:
+        kw['detect_every_max'] = args.detect_every_max
     det_kw = {k: v for k, v in (('backend', args.backend), ('scale', args.scale))
               if v is not None}
     if args.bridge is not None:
@@ -624,6 +637,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
         {'OpenCV': f'{cv2.__version__}, cv2.setNumThreads(1); timings are wall-clock on a '
                    'shared machine: compare against the LSD reference measured in the same run',
          'Tracker': f'LineTracker(detect_every={tracker.detect_every}, '
+                    f'detect_every_max={tracker.detect_every_max}, '
                     f'min_length={tracker.min_length:g}) with '
                     f'LineDetector(backend={det.backend!r}, scale={det.scale:g}, '
                     f'bridge={det.bridge}, bridge_join={det.bridge_join})',
@@ -698,7 +712,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               '`LSD ref`: the raw OpenCV LSD default (`cv2.createLineSegmentDetector()`) run on '
               'the same frame just before, in the same run; the `/ LSD` columns are the '
               'ratios of medians / means. `detect` = the detector on the frames where it runs '
-              f'(every {_nth(tracker.detect_every)}), `track` = everything else (edge search, KLT '
+              f'({_schedule(tracker)}), `track` = everything else (edge search, KLT '
               'for new or lost tracks, association, births). CPU = thread CPU time (less '
               'sensitive to other processes).', '',
               common.markdown_table(

@@ -15,7 +15,8 @@
 
 Run ``python -m mlofc_ros.bench tradeoff``; writes ``docs/results/tradeoff.md`` and
 ``tradeoff.png``. For every combination of the node parameters ``detector_scale``,
-``detect_every`` and ``bridge_crossings`` (the rest at their defaults):
+``detect_every``, ``bridge_crossings`` and ``detect_every_max`` (``fixed`` = ``detect_every``, a
+fixed rate; a larger value is detection on demand; the rest at their defaults):
 
 - **speed**: :meth:`Pipeline.process` on the rendered 640x480 sequence of ``bench pipeline``
   (boxes rotating about the camera centre + background, 60 frames), thread CPU ms per frame,
@@ -49,8 +50,9 @@ from mlofc_ros.bench.frontend import SWITCH_GOAL_PCT, TRACKED_GOAL
 #: Issue #7's speed goal: ``Pipeline.process`` / LSD alone, here on the means.
 SPEED_GOAL = 0.5
 
-#: A setting: (detector_scale, detect_every, bridge_crossings).
-Setting = Tuple[float, int, bool]
+#: A setting: (detector_scale, detect_every, bridge_crossings, detect_every_max); a
+#: detect_every_max of 0 stands for ``fixed`` (= detect_every).
+Setting = Tuple[float, int, bool, int]
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -59,6 +61,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--scales', default='1.0,0.8,0.7,0.6,0.5', help='detector_scale values')
     ap.add_argument('--every', default='1,2,3,4,5,6,8', help='detect_every values')
     ap.add_argument('--bridge', default='on,off', help='bridge_crossings values (on/off)')
+    ap.add_argument('--max', default='fixed,12',
+                    help='detect_every_max values: fixed (= detect_every) or an integer')
     ap.add_argument('--frames', type=int, default=30, help='frames per tracking sequence')
     ap.add_argument('--seeds', default='0,1,2,3', help='render seeds of the tracking sequences')
     ap.add_argument('--timing-frames', type=int, default=60,
@@ -69,17 +73,32 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def settings(args: argparse.Namespace) -> List[Setting]:
-    """Every combination of the ``--scales``, ``--every`` and ``--bridge`` values."""
+    """Every combination of the ``--scales``, ``--every``, ``--bridge`` and ``--max`` values.
+
+    An on-demand maximum not above ``detect_every`` is the fixed rate, listed once.
+    """
     scales = [float(x) for x in args.scales.split(',') if x]
     every = [int(x) for x in args.every.split(',') if x]
     bridge = [x.strip() == 'on' for x in args.bridge.split(',') if x]
-    return list(itertools.product(scales, every, bridge))
+    top = [0 if x.strip() == 'fixed' else int(x) for x in args.max.split(',') if x]
+    out = []
+    for scale, n, b, m in itertools.product(scales, every, bridge, top):
+        m = 0 if m <= n else m
+        if (scale, n, b, m) not in out:
+            out.append((scale, n, b, m))
+    return out
 
 
 def params_of(setting: Setting) -> Dict[str, object]:
     """Node parameters of a setting."""
-    scale, every, bridge = setting
-    return {'detector_scale': scale, 'detect_every': every, 'bridge_crossings': bridge}
+    scale, every, bridge, top = setting
+    return {'detector_scale': scale, 'detect_every': every, 'bridge_crossings': bridge,
+            'detect_every_max': top if top > every else every}
+
+
+def setting_text(setting: Setting) -> str:
+    """Write the node parameters of a setting as ``-p`` style assignments."""
+    return ' '.join(f'{k}:={str(v).lower()}' for k, v in params_of(setting).items())
 
 
 @functools.lru_cache(maxsize=2)
@@ -135,7 +154,8 @@ def pareto(records: Sequence[Dict[str, object]]) -> List[bool]:
     return out
 
 
-HEADERS = ['detector_scale', 'detect_every', 'bridge_crossings', 'process / LSD (means)',
+HEADERS = ['detector_scale', 'detect_every', 'bridge_crossings', 'detect_every_max',
+           'process / LSD (means)',
            'process / LSD (medians)', 'process mean ms', 'LSD median ms', 'tracked 5 (pooled)',
            'id switch % (pooled)', 'worst sequence tracked 5', 'sequences meeting #3',
            'meets #3 pooled', 'meets #7 (means)', 'front']
@@ -147,9 +167,9 @@ def build_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
     front = pareto(records)
     rows = []
     for r, on_front in zip(records, front):
-        scale, every, bridge = r['setting']
+        scale, every, bridge, top = r['setting']
         ok3 = frontend.meets_goal(r)
-        rows.append([scale, every, 'on' if bridge else 'off', r['mean_ratio'],
+        rows.append([scale, every, 'on' if bridge else 'off', top or 'fixed', r['mean_ratio'],
                      r['median_ratio'], r['mean_ms'], r['lsd_ms'], r['tracked_5'],
                      r['id_switch_pct'], r['worst_tracked_5'],
                      f"{r['meets']} / {r['sequences']}", 'yes' if ok3 else 'no',
@@ -162,8 +182,10 @@ def plot(path: pathlib.Path, records: Sequence[Dict[str, object]]) -> None:
     """Tracked-5 against the ratio of means, one marker per setting, the goals as lines."""
     fig, axes = common.new_figure(1, width_per_panel=7.0, height=5.0)
     ax = axes[0]
-    for bridge, marker in ((True, 'o'), (False, 's')):
-        rs = [r for r in records if r['setting'][2] == bridge]
+    for bridge, demand, marker in ((True, False, 'o'), (False, False, 's'),
+                                   (True, True, '^'), (False, True, 'v')):
+        rs = [r for r in records
+              if r['setting'][2] == bridge and bool(r['setting'][3]) == demand]
         if not rs:
             continue
         sc = ax.scatter([r['mean_ratio'] for r in rs], [r['tracked_5'] for r in rs],
@@ -171,7 +193,8 @@ def plot(path: pathlib.Path, records: Sequence[Dict[str, object]]) -> None:
                         marker=marker)
         # a grey legend marker: the colour is the scale, not the bridge
         ax.scatter([], [], c='0.5', marker=marker,
-                   label=f"bridge_crossings {'on' if bridge else 'off'}")
+                   label=f"bridge_crossings {'on' if bridge else 'off'}"
+                         + (', on demand' if demand else ''))
         for r in rs:
             ax.annotate(str(r['setting'][1]), (r['mean_ratio'], r['tracked_5']),
                         textcoords='offset points', xytext=(4, 3), fontsize=7)
@@ -180,7 +203,8 @@ def plot(path: pathlib.Path, records: Sequence[Dict[str, object]]) -> None:
     ax.axhline(TRACKED_GOAL, color='k', ls=':', lw=0.8)
     ax.set_xlabel('Pipeline.process / LSD alone, ratio of means (CPU)')
     ax.set_ylabel('tracked 5, pooled over 8 rendered sequences')
-    ax.set_title('front-end settings (numbers: detect_every); goals dashed / dotted')
+    ax.set_title('front-end settings (numbers: detect_every); goals dashed / dotted',
+                 fontsize=9)
     common.save_figure(fig, path, legend_ax=ax)
 
 
@@ -206,20 +230,19 @@ def build_report(argv: Sequence[str], records: Sequence[Dict[str, object]],
     if good:
         best = min(good, key=lambda r: r['mean_ratio'])
         lines.append('- Fastest setting meeting #3 (pooled): '
-                     f'`detector_scale:={best["setting"][0]} '
-                     f'detect_every:={best["setting"][1]} bridge_crossings:='
-                     f'{str(best["setting"][2]).lower()}`, {best["mean_ratio"]:.2f} x LSD on the '
+                     f'`{setting_text(best["setting"])}`, {best["mean_ratio"]:.2f} x LSD on the '
                      f'means ({best["tracked_5"]:.3f} tracked, {best["id_switch_pct"]:.2f}% '
                      'switches).')
     if fast:
         best = max(fast, key=lambda r: r['tracked_5'])
-        lines.append(f'- Best tracking within #7 (means): `detector_scale:={best["setting"][0]} '
-                     f'detect_every:={best["setting"][1]} bridge_crossings:='
-                     f'{str(best["setting"][2]).lower()}`, {best["tracked_5"]:.3f} tracked, '
+        lines.append(f'- Best tracking within #7 (means): `{setting_text(best["setting"])}`, '
+                     f'{best["tracked_5"]:.3f} tracked, '
                      f'{best["id_switch_pct"]:.2f}% switches, {best["mean_ratio"]:.2f} x LSD.')
     lines += ['', common.markdown_table(HEADERS, build_rows(records)), '',
               '`front`: no other setting is both cheaper (ratio of means) and tracks more. '
-              'Node defaults: `detector_scale:=0.8 detect_every:=3 bridge_crossings:=true`.', '',
+              'Node defaults: `detector_scale:=0.8 detect_every:=3 bridge_crossings:=true '
+              'detect_every_max:=12`. `detect_every_max` `fixed`: the detector on every '
+              '`detect_every`-th frame; a number: detection on demand up to that interval.', '',
               '![tradeoff](tradeoff.png)', '']
     return '\n'.join(lines)
 
