@@ -43,6 +43,7 @@ Segments are ``(u1, v1, u2, v2)`` px in the input image. A track keeps the orien
 born with (the detector's: brighter side on the left).
 """
 from functools import lru_cache
+import math
 from typing import Dict, NamedTuple, Optional, Tuple, Union
 
 import cv2
@@ -376,13 +377,14 @@ class LineTracker:
       runs at once when more than ``detect_on_loss`` of the tracks were not carried in a frame
       or when the edge pixels no track explains (gradient magnitude above ``edge_threshold``
       on the KLT image, farther than ~2 px from every track) grew by more than
-      ``new_edge_px`` (KLT-image pixels, ~30-50 px of new edge there) since the last
-      detection (a 0.2 ms check at 640x480). A static camera watching a few moving objects
-      then pays for the detector rarely: on the rendered camera_centre sequences every ~8th
-      frame instead of every 3rd (front-end CPU -30%); where faces keep turning into view
-      (own_centre) it stays near every 3rd. ``detect_every_max`` <= ``detect_every``: a fixed
-      rate. Cost, rendered seeds 0-3 / 4-9: tracked-5 0.937 / 0.931 -> 0.929 / 0.928, id
-      switches 0.53 / 0.52 -> 0.55 / 0.49 %.
+      ``new_edge_px`` (KLT-image pixels at 640x480, ~30-50 px of new edge there; scaled
+      with the image diagonal) since the last detection (a 0.2 ms check at 640x480). A
+      static camera watching a few moving objects then pays for the detector rarely: on the
+      rendered camera_centre sequences every ~8th frame instead of every 3rd (front-end CPU
+      -30%); where faces keep turning into view (own_centre) it stays near every 3rd.
+      ``detect_every_max`` <= ``detect_every``: a fixed rate. Cost, rendered seeds 0-3 /
+      4-9: tracked-5 0.937 / 0.931 -> 0.929 / 0.928, id switches 0.53 / 0.52 -> 0.55 /
+      0.49 %.
     * ``n_points``: KLT points per track; ``klt_win``: LK window, px of the LK image, which is
       the input resized by ``klt_scale``; ``klt_levels`` / ``klt_levels_predicted``: pyramid
       levels without / with a velocity prediction.
@@ -900,8 +902,11 @@ class LineTracker:
             return False
         # past the base interval: detect as soon as something new shows (tracks lost, or
         # edges that no track explains)
-        return (uncarried > self.detect_on_loss * t_n
-                or self._uncovered_edges(seg) > self._uncovered_after + self.new_edge_px)
+        if uncarried > self.detect_on_loss * t_n:
+            return True
+        # new_edge_px is for 640x480; edge pixel counts grow with the image's linear size
+        scale = math.hypot(*self._shape) / 800.0
+        return self._uncovered_edges(seg) > self._uncovered_after + self.new_edge_px * scale
 
     def _after_detect(self, unclaimed: int, alive: int) -> None:
         """Set the next detection interval from a detection's ``unclaimed`` (new) segments."""
