@@ -45,8 +45,9 @@ from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_ros.tracks.undistort import undistort_segments
 from mlofc_ros.tracks.window import TrackWindow
 
-#: Keys of :attr:`FrameResult.timings` (milliseconds).
-TIMING_KEYS = ('detect_track', 'undistort', 'window', 'solve', 'total')
+#: Keys of :attr:`FrameResult.timings` (milliseconds; ``detect``: the line detector alone, 0
+#: in the frames it does not run, part of ``detect_track``).
+TIMING_KEYS = ('detect_track', 'detect', 'undistort', 'window', 'solve', 'total')
 #: An image whose gray levels span at most this much is blank: no lines, the tracker skips it.
 BLANK_CONTRAST = 2
 #: A body is reported (``body_valid``) only with at least this many tracks in the window: with
@@ -505,6 +506,7 @@ class Pipeline:
         track_ids = np.asarray(track_ids, dtype=np.uint32).ravel()
         segments = np.asarray(segments, dtype=np.float32).reshape(-1, 4)
         timings['detect_track'] = (time.perf_counter() - t) * 1e3
+        timings['detect'] = 0.0 if blank else self._tracker.last_timing['detect'] * 1e3
 
         t = time.perf_counter()
         corrected = segments
