@@ -375,11 +375,11 @@ class LineTracker:
       frames, the interval doubles, up to ``detect_every_max`` frames; a detection that finds
       more brings it back to ``detect_every``. Past ``detect_every`` frames the detector also
       runs at once when more than ``detect_on_loss`` of the tracks were not carried in a frame
-      or when the edge pixels no track explains (gradient magnitude above ``edge_threshold``
-      on the KLT image, farther than ~2 px from every track) grew by more than
-      ``new_edge_px`` (KLT-image pixels at 640x480, ~30-50 px of new edge there; scaled
-      with the image diagonal) since the last detection (a 0.2 ms check at 640x480). A
-      static camera watching a few moving objects then pays for the detector rarely: on the
+      or when the edge pixels no track explains (``|Sobel x| + |Sobel y|`` of the KLT image
+      above ``edge_threshold`` grey levels, farther than ~2 px from every track) grew by more
+      than ``new_edge_px`` (KLT-image pixels at 640x480, ~30-50 px of new edge there; scaled
+      with the image diagonal) since the last detection (a 0.2 ms check at 640x480). A static
+      camera watching a few moving objects then pays for the detector rarely: on the
       rendered camera_centre sequences every ~8th frame instead of every 3rd (front-end CPU
       -30%); where faces keep turning into view (own_centre) it stays near every 3rd.
       ``detect_every_max`` <= ``detect_every``: a fixed rate. Cost, rendered seeds 0-3 /
@@ -459,9 +459,10 @@ class LineTracker:
             raise ValueError(f'detect_every must be >= 1, got {detect_every}')
         if int(detect_every_max) < 1:
             raise ValueError(f'detect_every_max must be >= 1, got {detect_every_max}')
-        if not (quiet_births >= 0 and detect_on_loss >= 0):
-            raise ValueError('quiet_births and detect_on_loss must be >= 0, got '
-                             f'{quiet_births} and {detect_on_loss}')
+        if not min(quiet_births, detect_on_loss, new_edge_px, edge_threshold) >= 0:
+            raise ValueError('quiet_births, detect_on_loss, new_edge_px and edge_threshold '
+                             f'must be >= 0, got {quiet_births}, {detect_on_loss}, '
+                             f'{new_edge_px} and {edge_threshold}')
         if int(n_points) < 3:
             raise ValueError(f'n_points must be >= 3, got {n_points}')
         if not min_length >= 0:
@@ -881,9 +882,9 @@ class LineTracker:
     # ------------------------------------------------------------------ detection schedule
     def _uncovered_edges(self, seg: np.ndarray) -> int:
         """Edge pixels of the current image (at ``klt_scale``) farther than ~2 px from ``seg``."""
-        small = self._small('cur')
         if seg.shape[0] == 0:
             return 0
+        small = self._small('cur')
         mag = cv2.add(cv2.convertScaleAbs(cv2.Sobel(small, cv2.CV_16S, 1, 0)),
                       cv2.convertScaleAbs(cv2.Sobel(small, cv2.CV_16S, 0, 1)))
         edges = cv2.compare(mag, self.edge_threshold, cv2.CMP_GT)
