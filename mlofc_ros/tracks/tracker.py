@@ -915,7 +915,9 @@ class LineTracker:
         # new segments per base interval: a longer wait has more to find
         rate = unclaimed * base / max(self._since_detect, 1)
         self._since_detect = 0
-        quiet = self._frame > 0 and rate <= self.quiet_births * alive
+        # the first `top` frames build the track set: the base rate there (and the solver's
+        # first windows see every birth)
+        quiet = self._frame >= top and rate <= self.quiet_births * alive
         # a quiet scene doubles the wait, anything new brings it back to the base rate
         self._interval = min(2 * max(self._interval, base), top) if quiet else base
 
