@@ -506,7 +506,8 @@ class Pipeline:
         track_ids = np.asarray(track_ids, dtype=np.uint32).ravel()
         segments = np.asarray(segments, dtype=np.float32).reshape(-1, 4)
         timings['detect_track'] = (time.perf_counter() - t) * 1e3
-        timings['detect'] = 0.0 if blank else self._tracker.last_timing['detect'] * 1e3
+        ran = not blank and self._tracker.last_timing['detected']
+        timings['detect'] = self._tracker.last_timing['detect'] * 1e3 if ran else 0.0
 
         t = time.perf_counter()
         corrected = segments

@@ -173,6 +173,10 @@ def test_result_shapes_types_and_timings():
         assert len(np.unique(r.track_ids)) == m
         assert r.carried.shape == (m,) and np.all(r.labels[r.carried] >= 0)
     assert m > 10
+    # the detector alone: > 0 in the frames it runs (0, 3, ...: the base rate first), else 0
+    detected = [r.timings['detect'] > 0 for r in results]
+    assert detected[:4] == [True, False, False, True]
+    assert all(r.timings['detect'] <= r.timings['detect_track'] for r in results)
     assert not results[0].body_valid.any() and np.all(results[0].labels == -1)
     last = results[-1]
     assert last.body_valid.all() and (last.labels >= 0).any(), last.problem
