@@ -382,9 +382,11 @@ class LineTracker:
       camera watching a few moving objects then pays for the detector rarely: on the
       rendered camera_centre sequences every ~8th frame instead of every 3rd (front-end CPU
       -30%); where faces keep turning into view (own_centre) it stays near every 3rd.
-      ``detect_every_max`` <= ``detect_every``: a fixed rate. Cost, rendered seeds 0-3 /
-      4-9: tracked-5 0.937 / 0.931 -> 0.929 / 0.928, id switches 0.53 / 0.52 -> 0.55 /
-      0.49 %.
+      The first ``detect_every_max`` frames run at the base rate (the track set is being
+      built; with ``general`` a longer first interval changed the first cold search: 300
+      frames own3+bg s1 1.4 -> 14.5% wrong). ``detect_every_max`` <= ``detect_every``: a
+      fixed rate. Cost, rendered seeds 0-3 / 4-9: tracked-5 0.937 / 0.931 -> 0.930 / 0.930,
+      id switches 0.53 / 0.52 -> 0.56 / 0.53 %.
     * ``n_points``: KLT points per track; ``klt_win``: LK window, px of the LK image, which is
       the input resized by ``klt_scale``; ``klt_levels`` / ``klt_levels_predicted``: pyramid
       levels without / with a velocity prediction.
