@@ -110,8 +110,9 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               'new edges get a track later.',
               range=(1, 100)),
     ParamSpec('detect_every_max', int, 12,
-              'Detection on demand: after a detection that finds almost nothing new (new '
-              'segments <= 3% of the tracks) the interval between detections doubles, up to '
+              'Detection on demand: after the first detect_every_max frames at the base rate, '
+              'a detection that finds almost nothing new (new segments <= 3% of the tracks) '
+              'doubles the interval between detections, up to '
               'this many frames; the detector runs at once (from detect_every frames on) when '
               'edges show that no track explains or more than 5% of the tracks are lost, and '
               'a detection that finds more brings the interval back to detect_every. A static '
