@@ -1017,8 +1017,9 @@ class LineTracker:
         self._misses = np.concatenate([misses[alive], np.zeros(nb, np.int32)]).astype(np.int32)
         self._omega = np.concatenate([omega[alive], np.zeros(nb)])
         self._age = np.concatenate([self._age[alive] + 1, np.zeros(nb, np.int32)])
-        if run_detect and self.detect_every_max > self.detect_every:
-            # what no track explains right after a detection: the reference for the next
+        if run_detect and self._interval > self.detect_every:
+            # what no track explains right after a detection: the reference of the checks
+            # that run only while the interval is longer than the base one
             self._uncovered_after = self._uncovered_edges(self._seg)
         self._prev = gray.copy()
         self._small_prev = self._small_cur
