@@ -152,6 +152,26 @@ def test_bad_input_raises():
         LineDetector(scale=0.0)
     with pytest.raises(ValueError):
         LineDetector(backend='nope')
+    with pytest.raises(ValueError):
+        LineDetector(lsd_bins=0)
+
+
+def test_coarse_lsd_bins_find_the_same_edges():
+    # LSD seeds regions in the order of its gradient-norm bins; 32 bins instead of OpenCV's
+    # 1024 (the default) only reorder seeds of about the same strength (the sort of every
+    # pixel is most of LSD's time on a noisy image)
+    render = pytest.importorskip('mlofc_ros.render')
+    seq = render.render_sequence(n_boxes=3, n_frames=1, size=(640, 480), seed=1,
+                                 noise_sigma=2.0)
+    truth = seq.truth[0]
+    gl = np.linalg.norm(truth.segments[:, 2:] - truth.segments[:, :2], axis=1)
+    gt = truth.segments[(gl >= 40) & (truth.visible_fraction >= 0.9)]
+    assert LineDetector().lsd_bins == 1024
+    fine = LineDetector().detect(seq.frames[0])
+    coarse = LineDetector(lsd_bins=32).detect(seq.frames[0])
+    hit_fine, hit_coarse = _on_line(fine, gt), _on_line(coarse, gt)
+    assert hit_coarse.mean() >= 0.9 and hit_coarse.sum() >= hit_fine.sum() - 2
+    assert abs(len(coarse) - len(fine)) <= 0.1 * len(fine)
 
 
 def test_callable_backend():

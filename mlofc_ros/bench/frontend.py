@@ -514,6 +514,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                     help='tracker detector LineDetector(bridge=...): lines cut up by crossings '
                          'added (on, the default), not (off), or joined with the segments they '
                          'continue (join: bridge_join=True)')
+    ap.add_argument('--lsd-bins', type=int, default=None,
+                    help='tracker detector LineDetector(lsd_bins=...): gradient-norm bins of LSD')
     ap.add_argument('--real-dir', default=REAL_DIR)
     ap.add_argument('--real-frames', type=int, default=80)
     ap.add_argument('--quick', action='store_true', help='10 frames, one seed (smoke run)')
@@ -571,8 +573,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         kw['detect_every'] = args.detect_every
     if args.detect_every_max is not None:
         kw['detect_every_max'] = args.detect_every_max
-    det_kw = {k: v for k, v in (('backend', args.backend), ('scale', args.scale))
-              if v is not None}
+    det_kw = {k: v for k, v in (('backend', args.backend), ('scale', args.scale),
+                                ('lsd_bins', args.lsd_bins)) if v is not None}
     if args.bridge is not None:
         det_kw['bridge'] = args.bridge != 'off'
         det_kw['bridge_join'] = args.bridge == 'join'
@@ -640,7 +642,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
                     f'detect_every_max={tracker.detect_every_max}, '
                     f'min_length={tracker.min_length:g}) with '
                     f'LineDetector(backend={det.backend!r}, scale={det.scale:g}, '
-                    f'bridge={det.bridge}, bridge_join={det.bridge_join})',
+                    f'bridge={det.bridge}, bridge_join={det.bridge_join}, '
+                    f'lsd_bins={det.lsd_bins})',
          'Run time': f'{seconds:.0f} s'})]
     lines += ['## Detectors on rendered frames', '',
               'Every 3rd frame of the rendered sequences below. A detection matches a GT edge '

@@ -512,6 +512,20 @@ class LineDetector:
     0.943 / 0.43 %), while the missed lines are what camera_centre s3 needs (0.946 vs 0.947;
     no bridge: 0.894). On by default since the tracker meets the issue #3 goal on 11 of the 12
     rendered sequences with it, 10 without (see ``docs/design.md``).
+
+    ``lsd_bins``: the number of gradient-norm bins in which LSD orders its seed pixels
+    (OpenCV's ``n_bins``, 1024 there and here; backends ``lsd`` and ``lsd_resize``). LSD
+    sorts every pixel by its bin, and on a noisy image that sort is most of its time: 32 bins
+    take LSD on the image resized by 0.8 from ~11 to ~6.7 ms (640x480, noise sigma 2; a flat
+    image: 3.2 ms) with the same segments to within a few. In the tracker (session 17,
+    rendered 640x480, render seeds 0-3 / 4-9, tracked-5 / id switches pooled) 32 bins gave
+    0.930 / 0.58 % and 0.930 / 0.57 % against 0.930 / 0.56 % and 0.930 / 0.54 % (13 instead
+    of 15 of the 20 sequences meeting issue #3 alone; 16 bins: 0.929 / 0.54 %, 0.932 /
+    0.57 %), the whole pipeline's mean frame 0.50-0.56x LSD alone against 0.53-0.54x (150
+    frames; the gain is within the machine's noise), and the spinning boxes (issue #6,
+    `general`, 30 frames) 1-1.3 points more wrong on average over six seeds (own2+bg 5.7 vs
+    4.4 %, own3+bg 7.4 vs 6.2 %; 16 bins was worse on five of five own3+bg seeds). So the
+    default stays 1024.
     """
 
     def __init__(self, min_length: float = 20.0, scale: float = 0.8,
@@ -519,7 +533,7 @@ class LineDetector:
                  merge: bool = True, merge_angle_deg: float = 2.0, merge_offset_px: float = 2.0,
                  merge_gap_px: float = 15.0, merge_oriented: bool = False, orient: bool = True,
                  refine: bool = True, bridge: bool = True, bridge_gap_px: float = 12.0,
-                 bridge_join: bool = False) -> None:
+                 bridge_join: bool = False, lsd_bins: int = 1024) -> None:
         if not min_length >= 0:
             raise ValueError(f'min_length must be >= 0, got {min_length}')
         if not 0.0 < scale <= 1.0:
@@ -541,6 +555,9 @@ class LineDetector:
             raise ValueError(f'bridge_gap_px must be > 3, got {bridge_gap_px}')
         self.bridge_gap_px = float(bridge_gap_px)
         self.bridge_join = bool(bridge_join)
+        if int(lsd_bins) < 1:
+            raise ValueError(f'lsd_bins must be >= 1, got {lsd_bins}')
+        self.lsd_bins = int(lsd_bins)
         self._scratch: dict = {}                 # bridge_crossings' reused image buffers
         self._impl = self._make_backend(backend, refine)
 
@@ -549,8 +566,11 @@ class LineDetector:
         ref = cv2.LSD_REFINE_STD if refine else cv2.LSD_REFINE_NONE
         if callable(backend):
             return backend
+        # OpenCV's defaults after refine and scale: sigma_scale, quant, ang_th, log_eps,
+        # density_th; then n_bins, the number of gradient-norm bins LSD sorts pixels into
+        lsd_args = (0.6, 2.0, 22.5, 0.0, 0.7, self.lsd_bins)
         if backend == 'lsd':
-            lsd = cv2.createLineSegmentDetector(ref, self.scale)
+            lsd = cv2.createLineSegmentDetector(ref, self.scale, *lsd_args)
             # OpenCV's LSD reports scaled coordinates shifted by -(1/scale - 1)/2 px (measured
             # on ideal step edges: -0.125 px at 0.8, -0.5 px at 0.5); put them on pixel centres
             shift = np.float32(0.5 * (1.0 / self.scale - 1.0))
@@ -563,7 +583,7 @@ class LineDetector:
             if not has_ximgproc():
                 raise ValueError(f'backend {backend!r} needs opencv-contrib (cv2.ximgproc)')
         if backend == 'lsd_resize':
-            det = cv2.createLineSegmentDetector(ref, 1.0)
+            det = cv2.createLineSegmentDetector(ref, 1.0, *lsd_args)
             run = (lambda g: det.detect(g)[0])
         elif backend == 'fld':
             fld = cv2.ximgproc.createFastLineDetector(
