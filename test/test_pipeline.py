@@ -592,3 +592,27 @@ def test_general_starts_once_the_window_holds_enough_frames(monkeypatch):
     for img, t in zip(seq.frames[:4], seq.stamps[:4]):
         p.process(img, t, seq.camera)
     assert methods == ['robust', 'general', 'general']
+
+
+def test_after_a_search_the_warm_start_needs_only_what_the_search_kept(monkeypatch):
+    # a scene the rotation model explains only in part: the warm start was rejected (under
+    # 75% inliers) and the search kept 0.62; the next WARM_FLOOR_SOLVES solves accept a warm
+    # start keeping 0.57, then the default holds again until the next search
+    import mlofc_ros.pipeline as pipeline_module
+    seq = small_sequence(12)
+    asked = []
+
+    def spy(*args, **kwargs):
+        asked.append(kwargs.get('warm_inliers'))
+        res = segment_lines(*args, **kwargs)
+        res.info.update(warm_rejected=len(asked) == 3, inlier_share=0.62)
+        return res
+    monkeypatch.setattr(pipeline_module, 'segment_lines', spy)
+    monkeypatch.setattr(pipeline_module, 'WARM_FLOOR_SOLVES', 4)
+    p = Pipeline(num_bodies=2, window=3)
+    for img, t in zip(seq.frames, seq.stamps):
+        p.process(img, t, seq.camera)
+    assert asked[:3] == [None] * 3 and asked[7:] == [None] * 4
+    np.testing.assert_allclose(asked[3:7], 0.62 - pipeline_module.WARM_FLOOR_MARGIN)
+    p.reset()                                       # forgotten with the bodies
+    assert p._warm_floor is None

@@ -58,3 +58,24 @@ def test_stale_labels_that_no_longer_explain_the_window_fall_back_to_the_search(
     res = segment_lines(sc.tracks[:, 1:], 3, intrinsics=sc.intrinsics, seed=0,
                         init_labels=stale)
     assert _wrong(res.labels, sc.labels, 3) < 0.03
+
+
+def test_warm_inliers_sets_the_share_a_warm_start_keeps_without_a_search():
+    # two bodies and a third one's tracks as outliers (27%): the previous labels keep 73% of
+    # the tracks, under the default 75%, so a search runs (and the warm pass competes in it);
+    # a lower warm_inliers (the pipeline's, after such a search) returns the warm pass alone
+    for seed in range(2):
+        sc = make_scene(3, [40, 40, 30], n_frames=6, noise_px=1.0, seed=seed)
+        body = sc.labels < 2
+        init = np.where(body, sc.labels, -1)
+        searched = segment_lines(sc.tracks[:, 1:], 2, intrinsics=sc.intrinsics, seed=0,
+                                 init_labels=init)
+        assert searched.info['warm_rejected']
+        assert 'previous-pass' in searched.info['candidate_costs']
+        assert 0.7 < searched.info['inlier_share'] < 0.75
+        warm = segment_lines(sc.tracks[:, 1:], 2, intrinsics=sc.intrinsics, seed=0,
+                             init_labels=init, warm_inliers=0.6)
+        assert warm.info['candidate'] == 'previous' and 'warm_rejected' not in warm.info
+        np.testing.assert_array_equal(warm.labels[body], sc.labels[body])
+        assert np.all(warm.labels[~body] == -1)
+        np.testing.assert_array_equal(warm.labels, searched.labels)

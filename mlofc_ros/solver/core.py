@@ -28,7 +28,7 @@ from .lines import (cayley_jacobian, cayley_to_rotvec, line_flows, LineFlows,
                     rotvec_to_cayley)
 from .models import fit_bodies, fit_stats, quad_costs, track_costs, track_stats
 from .result import SegmentationResult
-from .robust import noise_sigma, robust_segmentation
+from .robust import noise_sigma, robust_segmentation, WARM_INLIERS as ROBUST_WARM_INLIERS
 from .spatial import spatial_neighbours
 
 #: Methods accepted by :func:`segment_lines`.
@@ -151,10 +151,13 @@ def min_tracks_needed(n_bodies: int, n_frames: int, method: str, focal_known: bo
 
 
 def _solve_known_f(flows: LineFlows, tracks: np.ndarray, n: int, method: str,
-                   rng: np.random.Generator, init_labels=None):
+                   rng: np.random.Generator, init_labels=None,
+                   warm_inliers: Optional[float] = None):
     """Labels, Cayley vectors, exact weighted costs and info for one method at known f."""
     if method in ('robust', 'general'):
-        return robust_segmentation(flows, tracks, n, rng, init_labels=init_labels)
+        return robust_segmentation(flows, tracks, n, rng, init_labels=init_labels,
+                                   warm_inliers=(ROBUST_WARM_INLIERS if warm_inliers is None
+                                                 else warm_inliers))
     stats = track_stats(flows, weighted=False)          # the paper's methods are unweighted
     if n == 1:
         labels = np.where(stats.usable, 0, -1)
@@ -242,7 +245,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
                   image_size: Optional[Sequence[float]] = None, method: str = 'robust', *,
                   seed: int = 0, init_labels: Optional[np.ndarray] = None,
                   init_motions: Optional[Tuple[np.ndarray, np.ndarray]] = None,
-                  rescan: Optional[Sequence[int]] = None) -> SegmentationResult:
+                  rescan: Optional[Sequence[int]] = None,
+                  warm_inliers: Optional[float] = None) -> SegmentationResult:
     """Segment line tracks into rigid bodies by their rotation (multibody line optical flow).
 
     Parameters
@@ -279,6 +283,12 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         :data:`GENERAL_ROBUST_POLISH`). A body tracked in a wrong basin (a wrong pivot, the
         depth-reversed motion) otherwise keeps it window after window. The labels follow in
         the next window. The pipeline rescans one body per frame in turn.
+    warm_inliers : float, optional
+        'robust' (and the rotation-only step of 'general'), with ``init_labels``: the share
+        of the usable tracks that the previous labels' final pass must keep as inliers to be
+        returned without a search (default :data:`.robust.WARM_INLIERS`, 0.75). The pipeline
+        lowers it to what the last search achieved on scenes the rotation model explains
+        only in part (``info['warm_rejected']``, ``info['inlier_share']``).
 
     Returns
     -------
@@ -320,7 +330,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         init_labels = init_labels.astype(np.int64)
     rng = np.random.default_rng(seed)
     if method == 'general':
-        rot = segment_lines(arr, n, intr, size, 'robust', seed=seed, init_labels=init_labels)
+        rot = segment_lines(arr, n, intr, size, 'robust', seed=seed, init_labels=init_labels,
+                            warm_inliers=warm_inliers)
         mask = np.zeros(n, dtype=bool)
         if rescan is not None:
             ids = np.asarray(rescan, dtype=np.int64).ravel()
@@ -328,7 +339,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         return _general(arr, rot, rng, init_labels, _check_motions(init_motions, n), mask)
     if intr is not None:
         flows = line_flows(arr, intr)
-        labels, c, costs, info = _solve_known_f(flows, arr, n, method, rng, init_labels)
+        labels, c, costs, info = _solve_known_f(flows, arr, n, method, rng, init_labels,
+                                                warm_inliers)
         info.update(principal_point=(intr[2], intr[3]), aspect=intr[1] / intr[0],
                     image_size=size)
         return _finish(flows, labels, c, costs, intr[0], method, info)
@@ -353,10 +365,12 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     f = f0
     for span in (3.0, 1.2):
         flows = line_flows(arr, (f, f) + centre)
-        labels, c, costs, sub = _solve_known_f(flows, arr, n, 'robust', rng, init_labels)
+        labels, c, costs, sub = _solve_known_f(flows, arr, n, 'robust', rng, init_labels,
+                                               warm_inliers)
         f = refine_focal(profile_cost(arr, labels, n, centre), f, span=span)
     flows = line_flows(arr, (f, f) + centre)
-    labels, c, costs, sub = _solve_known_f(flows, arr, n, method, rng, init_labels)
+    labels, c, costs, sub = _solve_known_f(flows, arr, n, method, rng, init_labels,
+                                           warm_inliers)
     info.update(sub, principal_point=centre, aspect=1.0, image_size=size)
     return _finish(flows, labels, c, costs, f, method, info)
 

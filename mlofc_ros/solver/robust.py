@@ -43,6 +43,9 @@ from .spatial import smooth_labels, spatial_neighbours
 #: (tracker noise is heavier-tailed than Gaussian: 78-88% measured on rendered windows).
 WARM_INLIERS = 0.75
 
+#: Whether a rejected warm start's final pass competes with the search's candidates.
+WARM_COMPETES = True
+
 #: Outlier level: a track is rejected when its cost exceeds this chi-square quantile (99.99%:
 #: tracker noise is heavier-tailed than Gaussian; 99.9% left ~7% of rendered segments -1).
 OUTLIER_P = 0.9999
@@ -134,15 +137,22 @@ def sequential_msac(stats: TrackStats, tracks: np.ndarray, n: int, dof: np.ndarr
 
 def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
                         rng: np.random.Generator, sigma: Optional[float] = None,
-                        init_labels: Optional[np.ndarray] = None
+                        init_labels: Optional[np.ndarray] = None,
+                        warm_inliers: float = WARM_INLIERS
                         ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """Best of several initialisations, weighted K-subspaces, outliers rejected.
 
-    Returns labels ``(N,)``, Cayley vectors ``(n, 3)``, exact costs ``(N, n)`` and diagnostics.
+    ``init_labels`` (N,): the previous window's labels (``-1`` unknown). Their final pass is
+    returned alone when it leaves at least ``warm_inliers`` of the usable tracks inliers;
+    otherwise the other starts are searched and it competes with them (scored like them).
+    Returns labels ``(N,)``, Cayley vectors ``(n, 3)``, exact costs ``(N, n)`` and diagnostics
+    (``info['inlier_share']``; ``info['warm_rejected']``: a search ran past the warm start's
+    final pass).
     """
     stats = track_stats(flows, weighted=True)
     dof = 2.0 * flows.pairs_per_track()
     refined = []
+    warm, tried = None, False
     if init_labels is not None:
         # warm start (the previous window's labels): when they still explain the window, the
         # other starts are skipped -- the common case in a stream, and 3-5x cheaper
@@ -155,11 +165,16 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
             # no prior) would first drift away from them (rendered sequences: more -1, more
             # label changes, 1.5-2x the iterations)
             c, _ = fit_bodies(flows, init, n)
+            tried = True
             out = _final_pass(flows, tracks, init, c, dof, sigma, 'previous', {})
             lab = out[0]
             counts = np.bincount(lab[lab >= 0], minlength=n)
-            if np.all(counts >= 2) and np.mean(lab[stats.usable] >= 0) >= WARM_INLIERS:
+            share = float(np.mean(lab[stats.usable] >= 0)) if stats.usable.any() else 0.0
+            if np.all(counts >= 2) and share >= warm_inliers:
+                out[3]['inlier_share'] = share
                 return out
+            if np.all(counts >= 2):
+                warm = out
         # still a candidate, refined like the others
         refined.append(('previous',) + ksubspaces(stats, n, init, trim_dof=dof))
     starts = []
@@ -198,10 +213,24 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
         sigma = min(noise_sigma(e, r[1], dof) for r, e in zip(refined, exact))
     cap = chi2_quantile(OUTLIER_P, dof) * sigma ** 2
     scores = [total_cost(costs, lab, cap) for _, lab, _, costs in refined]
+    names = [r[0] for r in refined]
     best = int(np.argmin(scores))
     name, lab, c, _ = refined[best]
-    return _final_pass(flows, tracks, lab, c, dof, sigma, name,
-                       dict(zip([r[0] for r in refined], scores)), exact[best])
+    costs = exact[best]
+    if warm is not None and WARM_COMPETES:
+        # the warm start's own final pass competes too, scored at the same noise level: on
+        # real scenes that the rotation model explains only in part it had been rejected for
+        # fewer than warm_inliers inliers, and the search's winner then explained still fewer
+        w_score = total_cost(warm[2], warm[0], cap)
+        names.append('previous-pass')
+        scores.append(w_score)
+        if w_score < scores[best]:
+            name, lab, c, costs = 'previous-pass', warm[0], warm[1], warm[2]
+    out = _final_pass(flows, tracks, lab, c, dof, sigma, name, dict(zip(names, scores)), costs)
+    out[3]['inlier_share'] = (float(np.mean(out[0][stats.usable] >= 0))
+                              if stats.usable.any() else 0.0)
+    out[3]['warm_rejected'] = tried
+    return out
 
 
 def free_residuals(stats: TrackStats, dof: np.ndarray) -> np.ndarray:
