@@ -610,7 +610,7 @@ class Pipeline:
                                     init_labels=init, init_motions=motions, rescan=rescan,
                                     warm_inliers=warm_inliers)
                 if res.info.get('warm_rejected'):
-                    self._warm_floor = (res.info['inlier_share'] - WARM_FLOOR_MARGIN,
+                    self._warm_floor = (max(res.info['inlier_share'] - WARM_FLOOR_MARGIN, 0.0),
                                         WARM_FLOOR_SOLVES)
             except (ValueError, NotImplementedError) as exc:
                 problems.append(f'solver: {exc}')

@@ -13,6 +13,7 @@
 # limitations under the License.
 """Warm-started robust solves (``init_labels``: the previous window's labels, as the pipeline)."""
 import numpy as np
+import pytest
 
 from mlofc_ros.bench.common import best_permutation, motion_errors
 from mlofc_ros.solver import segment_lines
@@ -79,3 +80,7 @@ def test_warm_inliers_sets_the_share_a_warm_start_keeps_without_a_search():
         np.testing.assert_array_equal(warm.labels[body], sc.labels[body])
         assert np.all(warm.labels[~body] == -1)
         np.testing.assert_array_equal(warm.labels, searched.labels)
+    for bad in (-0.1, 1.5, float('nan')):
+        with pytest.raises(ValueError, match='warm_inliers'):
+            segment_lines(sc.tracks[:, 1:], 2, intrinsics=sc.intrinsics, init_labels=init,
+                          warm_inliers=bad)

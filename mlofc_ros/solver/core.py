@@ -299,8 +299,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     Raises
     ------
     ValueError
-        Wrong shape, K < 2, non-finite intrinsics, ``n_bodies < 0``, unknown method, or fewer
-        usable tracks than the model needs.
+        Wrong shape, K < 2, non-finite intrinsics, ``n_bodies < 0``, unknown method,
+        ``warm_inliers`` outside [0, 1], or fewer usable tracks than the model needs.
     """
     if method not in METHODS:
         raise ValueError(f'unknown method {method!r}; choose from {METHODS}')
@@ -309,6 +309,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     n = int(n_bodies)
     if n < 0:
         raise ValueError(f'n_bodies must be >= 0 (0 = automatic), got {n}')
+    if warm_inliers is not None and not 0.0 <= warm_inliers <= 1.0:
+        raise ValueError(f'warm_inliers must be a share in [0, 1], got {warm_inliers!r}')
     arr = _check_tracks(tracks)
     intr, size = _check_intrinsics(intrinsics, image_size)
     if n == 0:
