@@ -600,7 +600,10 @@ class Pipeline:
                     rescan = [self._rescan % n_req]
                     self._rescan = (self._rescan + 1) % n_req
             warm_inliers = None
-            if init is not None and self._warm_floor is not None:
+            # 'robust' only: 'general' (and its first frames, answered by 'robust') keeps the
+            # rotation-only step as tuned (see segment_lines' warm_competes)
+            if (init is not None and self.params['method'] == 'robust'
+                    and self._warm_floor is not None):
                 floor, left = self._warm_floor
                 warm_inliers = min(floor, ROBUST_WARM_INLIERS)
                 self._warm_floor = (floor, left - 1) if left > 1 else None
@@ -608,7 +611,8 @@ class Pipeline:
                 res = segment_lines(win_tracks, n_req, intrinsics=intrinsics, image_size=size,
                                     method=method, seed=int(self.params['seed']),
                                     init_labels=init, init_motions=motions, rescan=rescan,
-                                    warm_inliers=warm_inliers)
+                                    warm_inliers=warm_inliers,
+                                    warm_competes=self.params['method'] == 'robust')
                 if res.info.get('warm_rejected'):
                     self._warm_floor = (max(res.info['inlier_share'] - WARM_FLOOR_MARGIN, 0.0),
                                         WARM_FLOOR_SOLVES)

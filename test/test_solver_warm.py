@@ -80,6 +80,9 @@ def test_warm_inliers_sets_the_share_a_warm_start_keeps_without_a_search():
         np.testing.assert_array_equal(warm.labels[body], sc.labels[body])
         assert np.all(warm.labels[~body] == -1)
         np.testing.assert_array_equal(warm.labels, searched.labels)
+    alone = segment_lines(sc.tracks[:, 1:], 2, intrinsics=sc.intrinsics, seed=0,
+                          init_labels=init, warm_competes=False)
+    assert alone.info['warm_rejected'] and 'previous-pass' not in alone.info['candidate_costs']
     for bad in (-0.1, 1.5, float('nan')):
         with pytest.raises(ValueError, match='warm_inliers'):
             segment_lines(sc.tracks[:, 1:], 2, intrinsics=sc.intrinsics, init_labels=init,

@@ -43,7 +43,8 @@ from .spatial import smooth_labels, spatial_neighbours
 #: (tracker noise is heavier-tailed than Gaussian: 78-88% measured on rendered windows).
 WARM_INLIERS = 0.75
 
-#: Whether a rejected warm start's final pass competes with the search's candidates.
+#: Whether a rejected warm start's final pass competes with the search's candidates (the
+#: default of ``robust_segmentation(warm_competes=...)``).
 WARM_COMPETES = True
 
 #: Outlier level: a track is rejected when its cost exceeds this chi-square quantile (99.99%:
@@ -138,13 +139,15 @@ def sequential_msac(stats: TrackStats, tracks: np.ndarray, n: int, dof: np.ndarr
 def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
                         rng: np.random.Generator, sigma: Optional[float] = None,
                         init_labels: Optional[np.ndarray] = None,
-                        warm_inliers: float = WARM_INLIERS
+                        warm_inliers: float = WARM_INLIERS,
+                        warm_competes: bool = WARM_COMPETES
                         ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """Best of several initialisations, weighted K-subspaces, outliers rejected.
 
     ``init_labels`` (N,): the previous window's labels (``-1`` unknown). Their final pass is
     returned alone when it leaves at least ``warm_inliers`` of the usable tracks inliers;
-    otherwise the other starts are searched and it competes with them (scored like them).
+    otherwise the other starts are searched and, with ``warm_competes``, it competes with them
+    (scored like them).
     Returns labels ``(N,)``, Cayley vectors ``(n, 3)``, exact costs ``(N, n)`` and diagnostics
     (``info['inlier_share']``; ``info['warm_rejected']``: a search ran past the warm start's
     final pass).
@@ -217,7 +220,7 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
     best = int(np.argmin(scores))
     name, lab, c, _ = refined[best]
     costs = exact[best]
-    if warm is not None and WARM_COMPETES:
+    if warm is not None and warm_competes:
         # the warm start's own final pass competes too, scored at the same noise level: on
         # real scenes that the rotation model explains only in part it had been rejected for
         # fewer than warm_inliers inliers, and the search's winner then explained still fewer
