@@ -255,7 +255,8 @@ def make_tracker(params: Mapping[str, Any]) -> LineTracker:
     """Build the line tracker (with :func:`make_detector`) the pipeline runs with ``params``."""
     return LineTracker(make_detector(params), min_length=float(params['min_segment_length']),
                        detect_every=int(params['detect_every']),
-                       detect_every_max=int(params['detect_every_max']))
+                       detect_every_max=int(params['detect_every_max']),
+                       detect_regions=bool(params['detect_regions']))
 
 
 class Pipeline:
@@ -309,8 +310,8 @@ class Pipeline:
 
         ``window`` restarts the window; ``num_bodies`` restarts body numbering;
         ``min_segment_length`` restarts the tracker and the window; ``detect_every``,
-        ``detect_every_max``, ``detector_backend``, ``detector_scale`` and
-        ``bridge_crossings`` change only the detection (tracks carry on). Raises like the
+        ``detect_every_max``, ``detect_regions``, ``detector_backend``, ``detector_scale``
+        and ``bridge_crossings`` change only the detection (tracks carry on). Raises like the
         constructor, changing nothing when any value is invalid.
         """
         unknown = sorted(set(kwargs) - set(_params.PARAMS))
@@ -327,6 +328,7 @@ class Pipeline:
             # detection settings, not state: the tracks carry on
             self._tracker.detect_every = int(self.params['detect_every'])
             self._tracker.detect_every_max = int(self.params['detect_every_max'])
+            self._tracker.detect_regions = bool(self.params['detect_regions'])
             if changed & {'detector_backend', 'detector_scale'}:
                 self._tracker.detector = make_detector(self.params)
             self._tracker.detector.bridge = bool(self.params['bridge_crossings'])

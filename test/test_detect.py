@@ -293,3 +293,44 @@ def test_rows_not_in_matches_the_dense_comparison():
     np.testing.assert_array_equal(_rows_not_in(seg, base), dense)
     assert 0 < dense.sum() < seg.shape[0]
     assert _rows_not_in(seg, base[:0]).all() and _rows_not_in(seg[:0], base).shape == (0,)
+
+
+def _bars():
+    """A 640x480 image with a horizontal bar across the middle and a small square at the left."""
+    img = np.full((480, 640), 60, np.uint8)
+    cv2.rectangle(img, (100, 200), (540, 260), 200, -1)       # edges v = 200 and 260
+    cv2.rectangle(img, (20, 20), (80, 80), 200, -1)
+    return np.clip(img + np.random.default_rng(0).normal(0, 2, img.shape), 0, 255
+                   ).astype(np.uint8)
+
+
+def test_detect_regions_finds_what_the_whole_image_finds_inside_a_box():
+    det = LineDetector()
+    img = _bars()
+    full = det.detect(img)
+    seg, clipped = det.detect_regions(img, np.array([[0, 0, 120, 120]]))
+    # the square's four edges, at the whole image's coordinates
+    assert len(seg) == 4 and not clipped.any()
+    inside = full[(full[:, [0, 2]].max(axis=1) < 120) & (full[:, [1, 3]].max(axis=1) < 120)]
+    assert len(inside) == 4
+    for s in seg:
+        d = np.abs(inside - s).max(axis=1)
+        d = np.minimum(d, np.abs(inside - s[[2, 3, 0, 1]]).max(axis=1))
+        assert d.min() < 0.5
+
+
+def test_detect_regions_marks_lines_the_crop_cuts():
+    det = LineDetector()
+    img = _bars()
+    # the box cuts the bar's long edges at u = 300; the image border at u = 0 cuts nothing
+    seg, clipped = det.detect_regions(img, np.array([[0, 150, 300, 320]]))
+    long = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) > 100
+    assert long.sum() == 2 and clipped[long].all()
+    assert np.all(seg[long][:, [0, 2]].max(axis=1) > 297)      # they end at the crop side
+    assert not clipped[~long].any()                              # the bar's left end (u = 100)
+    with pytest.raises(ValueError, match='boxes'):
+        det.detect_regions(img, np.array([[0, 0, 700, 100]]))
+    with pytest.raises(ValueError, match='boxes'):
+        det.detect_regions(img, np.array([[50, 0, 50, 100]]))
+    empty, cut = det.detect_regions(img, np.zeros((0, 4), int))
+    assert empty.shape == (0, 4) and cut.shape == (0,)

@@ -381,6 +381,9 @@ def test_constructor_and_reconfigure_validate_like_the_node():
     assert r.window_fill == 2 and p._tracker.detect_every == 5
     assert p._tracker.detect_every_max == 5
     assert ids & set(r.track_ids.tolist())
+    assert not p._tracker.detect_regions                               # the default
+    p.reconfigure(detect_regions=True)                                # detection only
+    assert p._tracker.detect_regions and p.window_fill == 2
     assert p._tracker.detector.bridge                                  # the default
     tracker = p._tracker
     p.reconfigure(bridge_crossings=False)                             # detection only

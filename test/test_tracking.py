@@ -262,6 +262,39 @@ def test_detection_on_demand_waits_in_a_quiet_scene_and_reacts_to_news():
     assert demand._interval == demand.detect_every
 
 
+def test_detect_regions_finds_a_new_bar_in_a_crop_and_still_sees_the_whole_image():
+    tr = LineTracker(detect_regions=True)
+    areas = []
+    for f in range(40):
+        tr.update(_static_scene(seed=f))
+        areas.append(tr.last_timing['detected_area'] if tr.last_timing['detected'] else None)
+    top = tr.detect_every_max
+    # the first detect_every_max frames, then the first detection after detect_every_max
+    # frames (at most detect_every_max later): the whole image; between them crops, here
+    # none at all (nothing is new)
+    assert all(a in (None, 1.0) for a in areas[:top])
+    assert 0.0 in areas
+    full = [f for f, a in enumerate(areas) if a == 1.0]
+    assert np.all(np.diff(full) < 2 * top) and 40 - full[-1] < 2 * top
+    f = 40
+    while not tr.last_timing['detected']:                 # past a detection
+        tr.update(_static_scene(seed=f))
+        f += 1
+    for f in range(f, f + tr.detect_every + 1):
+        ids_before = set(tr.update(_static_scene(seed=f))[0].tolist())
+    ids, seg = tr.update(_static_scene(new_bar=True, seed=f + 1))
+    assert 0.0 < tr.last_timing['detected_area'] < 0.2     # only around the new bar
+    born = [s for i, s in zip(ids, seg) if int(i) not in ids_before]
+    assert born, 'the new bar got no track'
+    mid = np.array([[(s[0] + s[2]) / 2, (s[1] + s[3]) / 2] for s in born])
+    assert np.all((np.abs(mid - (200, 185)) <= (30, 20)).all(axis=1))    # on the bar
+    assert ids_before <= set(ids.tolist())                 # the other tracks carry on
+    with pytest.raises(ValueError, match='region_tile_px'):
+        LineTracker(region_tile_px=4)
+    with pytest.raises(ValueError, match='region_max_area'):
+        LineTracker(region_max_area=0.0)
+
+
 def test_detection_on_demand_runs_when_tracks_are_lost():
     tr = LineTracker()
     for f in range(40):                      # long enough to reach the longest interval

@@ -507,6 +507,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--detect-every-max', type=int, default=None,
                     help='LineTracker.detect_every_max: longest detection interval in a quiet '
                          'scene (default: the tracker default)')
+    ap.add_argument('--regions', choices=('on', 'off'), default=None,
+                    help='LineTracker.detect_regions: detection on demand on the image regions '
+                         'no track explains (default: the tracker default)')
     ap.add_argument('--backend', default=None,
                     help='tracker detector backend (lsd, lsd_resize, fld, edlines)')
     ap.add_argument('--scale', type=float, default=None, help='tracker detector scale')
@@ -573,6 +576,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         kw['detect_every'] = args.detect_every
     if args.detect_every_max is not None:
         kw['detect_every_max'] = args.detect_every_max
+    if args.regions is not None:
+        kw['detect_regions'] = args.regions == 'on'
     det_kw = {k: v for k, v in (('backend', args.backend), ('scale', args.scale),
                                 ('lsd_bins', args.lsd_bins)) if v is not None}
     if args.bridge is not None:
@@ -640,6 +645,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
                    'shared machine: compare against the LSD reference measured in the same run',
          'Tracker': f'LineTracker(detect_every={tracker.detect_every}, '
                     f'detect_every_max={tracker.detect_every_max}, '
+                    f'detect_regions={tracker.detect_regions}, '
                     f'min_length={tracker.min_length:g}) with '
                     f'LineDetector(backend={det.backend!r}, scale={det.scale:g}, '
                     f'bridge={det.bridge}, bridge_join={det.bridge_join}, '

@@ -559,6 +559,7 @@ class LineDetector:
             raise ValueError(f'lsd_bins must be >= 1, got {lsd_bins}')
         self.lsd_bins = int(lsd_bins)
         self._scratch: dict = {}                 # bridge_crossings' reused image buffers
+        self._region_scratch: dict = {}          # the same for detect_regions' crops
         self._impl = self._make_backend(backend, refine)
 
     def _make_backend(self, backend: Backend,
@@ -656,3 +657,50 @@ class LineDetector:
                     new[new] = ~_covers_any(both[new], seg)
                     seg = np.concatenate([seg, both[new]])
         return np.ascontiguousarray(seg, dtype=np.float32)
+
+    def detect_regions(self, gray: np.ndarray, boxes: np.ndarray, clip_px: float = 2.0
+                       ) -> Tuple[np.ndarray, np.ndarray]:
+        """Detect in rectangles of ``gray`` only: ``(segments (M, 4) float32, clipped (M,))``.
+
+        ``boxes (B, 4)`` int ``(u0, v0, u1, v1)`` px, end-exclusive, inside the image. Each box
+        goes through :meth:`detect` on its own and its segments are shifted back into the
+        image's pixels. ``clipped`` marks segments with an endpoint within ``clip_px`` of a
+        box side that is not an image border: such a segment may be the part of a longer line
+        that the crop cut off, so its extent is not the line's. A segment crossing from one
+        box into another comes out as one piece per box. Costs about what :meth:`detect` costs
+        on an image of the boxes' total area (plus ~0.1 ms per box).
+        """
+        if gray.ndim != 2 or gray.dtype != np.uint8:
+            raise ValueError(f'expected a (H, W) uint8 gray image, got {gray.dtype} '
+                             f'{gray.shape}')
+        b = np.asarray(boxes, dtype=np.int64).reshape(-1, 4)
+        h, w = gray.shape
+        if b.size and (b[:, 0].min() < 0 or b[:, 1].min() < 0 or b[:, 2].max() > w
+                       or b[:, 3].max() > h or np.any(b[:, 2] <= b[:, 0])
+                       or np.any(b[:, 3] <= b[:, 1])):
+            raise ValueError(f'boxes must be non-empty (u0, v0, u1, v1) inside {w}x{h}, '
+                             f'got {b.tolist()}')
+        # the crops have other shapes than whole frames: their buffers apart from the frames'
+        scratch, self._scratch = self._scratch, self._region_scratch
+        try:
+            parts = []
+            for u0, v0, u1, v1 in b:                     # a few regions, not lines
+                seg = self.detect(np.ascontiguousarray(gray[v0:v1, u0:u1]))
+                seg[:, 0::2] += u0
+                seg[:, 1::2] += v0
+                parts.append((seg, (u0, v0, u1, v1)))
+        finally:
+            self._region_scratch, self._scratch = self._scratch, scratch
+        if not parts:
+            return np.zeros((0, 4), np.float32), np.zeros(0, bool)
+        seg = np.concatenate([p[0] for p in parts])
+        edges = np.concatenate([np.repeat([p[1]], p[0].shape[0], axis=0) for p in parts]
+                               ).astype(np.float64).reshape(-1, 4)
+        u0, v0, u1, v1 = edges.T
+        u, v = seg[:, 0::2].astype(np.float64), seg[:, 1::2].astype(np.float64)   # (M, 2)
+        # pixel centres of a box run from u0 to u1 - 1; image borders cut nothing
+        cut = (((u0 > 0)[:, None] & (u < (u0 + clip_px)[:, None]))
+               | ((u1 < w)[:, None] & (u > (u1 - 1 - clip_px)[:, None]))
+               | ((v0 > 0)[:, None] & (v < (v0 + clip_px)[:, None]))
+               | ((v1 < h)[:, None] & (v > (v1 - 1 - clip_px)[:, None])))
+        return np.ascontiguousarray(seg, dtype=np.float32), cut.any(axis=1)
