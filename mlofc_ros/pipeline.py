@@ -627,12 +627,18 @@ class Pipeline:
         timings['solve'] = (time.perf_counter() - t) * 1e3
 
         if res is not None:
-            omega = np.asarray(res.angular_velocities, dtype=float).reshape(-1, 3) / interval
+            published = np.asarray(res.angular_velocities, dtype=float).reshape(-1, 3)
+            # 'general' publishes a refit of each body's rotation; body ids and the warm start
+            # follow the motions the labels were made with
+            segmented = np.asarray(res.info.get('segmentation_angular_velocities', published),
+                                   dtype=float).reshape(-1, 3)
+            omega = segmented / interval
+            published = published / interval
             cov = np.asarray(res.angular_covariances, dtype=float).reshape(-1, 3, 3)
             cov = cov / interval ** 2
             lab = np.asarray(res.labels).astype(np.int64)
             support = np.bincount(lab[lab >= 0], minlength=len(omega))[:len(omega)]
-            valid = (np.all(np.isfinite(omega), axis=1)
+            valid = (np.all(np.isfinite(omega), axis=1) & np.all(np.isfinite(published), axis=1)
                      & np.all(np.isfinite(cov.reshape(len(cov), -1)), axis=1)
                      & (support >= MIN_BODY_TRACKS))
             mid = None
@@ -643,14 +649,13 @@ class Pipeline:
             mapping = self.bodies.update(win_ids, res.labels, omega, valid, positions=mid)
             n_out = max(self.n_bodies, int(mapping.max()) + 1 if mapping.size else 0)
             w_out, c_out, v_out = _invalid_bodies(n_out)
-            w_out[mapping] = omega
+            w_out[mapping] = published
             c_out[mapping] = cov
             v_out[mapping] = valid
             t_dirs = res.info.get('translation_directions')
             if t_dirs is not None:
                 for j in np.flatnonzero(valid):                  # bodies, not lines
-                    self._motions[int(mapping[j])] = (np.asarray(res.angular_velocities[j]),
-                                                      np.asarray(t_dirs[j]))
+                    self._motions[int(mapping[j])] = (segmented[j], np.asarray(t_dirs[j]))
             stable = relabel(res.labels, mapping)
             labels = _lookup(track_ids, win_ids, stable.astype(np.int32), -1).astype(np.int32)
             memory = int(self.params['label_memory'])

@@ -41,6 +41,20 @@ FOCAL_RANGE = (0.25, 8.0)
 #: LM iterations of the final refit of every 'general' body at the measured noise level.
 POLISH_ITERATIONS = 10
 
+#: The published rotation of every 'general' body is refit (:func:`.polish_body`, robust) at
+#: this fraction of the measured noise variance, from the segmentation's motion and on its
+#: lines, which keep their labels; the segmentation, the pipeline's body ids and the next
+#: window's warm start keep the segmentation's motion. The marginalised model's prior on the
+#: line directions pulls W towards a rotation-only fit by ~sigma2 (3.4% of |w| at
+#: :data:`.general.NOISE_FACTOR`, ~1% at the measured noise); at a small fraction of it the
+#: model tends to the fitted-direction one, unbiased near the right basin, and the robust cost
+#: at that scale lets the few mislabelled lines hardly pull. Spinning benchmark (window 10,
+#: render seeds 0-5, the same labels), boxes with omega within 5% own2+bg / own3+bg / own3:
+#: 7 / 14 / 13 -> 9 / 17 / 18 of 12 / 18 / 18, median error 2 / 3 / 2 -> 0 / 1 / 1%, for one
+#: more refit per body per frame (session 19, docs/design.md). None: publish the
+#: segmentation's motion.
+PUBLISH_NOISE_SCALE: Optional[float] = 0.01
+
 #: A rescanned body (``rescan`` of :func:`segment_lines`) takes the pivot search's fit only
 #: when it is cheaper than the tracked one by this share of its cost: the fits are compared
 #: on the same lines at the measured noise, but near-equal basins swap on noise (spinning
@@ -304,6 +318,11 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     SegmentationResult
         ``labels (N,)``, ``angular_velocities (n, 3)`` rad per frame interval in the camera
         optical frame, ``angular_covariances``, ``focal_length`` (px), ``residuals (N,)``.
+        With 'general' (K >= 3) ``angular_velocities`` and their covariances are each body's
+        refit for publication (:data:`PUBLISH_NOISE_SCALE`) and
+        ``info['segmentation_angular_velocities'] (n, 3)`` the motions the labels were made
+        with, which go with ``info['translation_directions']`` into the next window's
+        ``init_motions``.
 
     Raises
     ------
@@ -482,8 +501,9 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
                                           sigma2, obs.body_ray(idx), robust=robust)
                 fit = alt if alt[2] < (1.0 - margin) * fit[2] else fit
             sol['W'][b], sol['T'][b] = fit[0], fit[1]
-    cov = np.stack([body_covariance(obs, np.flatnonzero(labels == b), sol['W'][b],
-                                    sol['T'][b], sigma2, marginal=True)
+    W_pub, T_pub = _published_motions(obs, labels, sol['W'], sol['T'], sigma2)
+    cov = np.stack([body_covariance(obs, np.flatnonzero(labels == b), W_pub[b], T_pub[b],
+                                    sigma2, marginal=True)
                     for b in range(n)])
     scale = np.linalg.norm(sol['T'], axis=1)
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -494,10 +514,30 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
         directions = np.where(scale[:, None] > 0, sol['T'] / scale[:, None], 0.0)
     info = dict(rot.info, sigma_px=float(np.sqrt(sigma2)), start=sol['start'],
                 translation_directions=directions, translation_scales=scale,
-                image_size=size)
-    return SegmentationResult(labels=labels, angular_velocities=sol['W'],
+                segmentation_angular_velocities=sol['W'], image_size=size)
+    return SegmentationResult(labels=labels, angular_velocities=W_pub,
                               angular_covariances=cov, focal_length=f, residuals=rms,
                               costs=sol['costs'], method='general', info=info)
+
+
+def _published_motions(obs: LineObservations, labels: np.ndarray, W: np.ndarray,
+                       T: np.ndarray, sigma2: float) -> Tuple[np.ndarray, np.ndarray]:
+    """Return the motions ``(W (n, 3), T (n, 3))`` that 'general' publishes.
+
+    Each body's refit from ``W, T`` (the segmentation's, at noise ``sigma2`` px^2) on its
+    ``labels`` at :data:`PUBLISH_NOISE_SCALE` of that noise; bodies with fewer than 3 lines,
+    or all of them when it is None, keep ``W, T``.
+    """
+    W_pub, T_pub = W.copy(), T.copy()
+    if PUBLISH_NOISE_SCALE is None:
+        return W_pub, T_pub
+    s2 = sigma2 * PUBLISH_NOISE_SCALE
+    for b in range(W.shape[0]):                          # bodies, not lines
+        idx = np.flatnonzero(labels == b)
+        if idx.size >= 3:
+            W_pub[b], T_pub[b], _ = polish_body(obs, idx, W[b], T[b], POLISH_ITERATIONS, s2,
+                                                s2)
+    return W_pub, T_pub
 
 
 def assign_with_motions(tracks, angular_velocities, intrinsics: Sequence[float], *,
