@@ -298,15 +298,16 @@ def test_in_process_bad_input_queue_drops_and_parameter_changes(ros):
         assert len({stamp_of(c) for c in clouds}) == len(clouds)
         print('burst of 12 frames:', s)
         # run-time parameters through the parameter services
-        ok = h.set_params('/robust/mlofc', num_bodies=3, window=4, min_segment_length=25)
+        ok = h.set_params('/robust/mlofc', num_bodies=3, window=4, min_segment_length=25,
+                          detect_regions=True)
         assert all(r.successful for r in ok), [r.reason for r in ok]
         assert h.wait(lambda: '/robust/mlofc/body_2/twist' in h.topics())
         for name, value, word in (('window', 1, 'window'), ('method', 'nope', 'nope'),
                                   ('focal_length', 'x', 'double'), ('queue_size', 0, '1')):
             res = h.set_params('/robust/mlofc', **{name: value})[0]
             assert not res.successful and word in res.reason, res.reason
-        assert h.get_params('/robust/mlofc', 'window', 'method', 'num_bodies') == \
-            [4, 'robust', 3]
+        assert h.get_params('/robust/mlofc', 'window', 'method', 'num_bodies',
+                            'detect_regions') == [4, 'robust', 3, True]
         n = len(clouds)
         send_frames(h, pub, seq.frames[5:7], [10.0, 10.0 + 1 / 30], clouds)
         assert len(clouds) == n + 2

@@ -393,13 +393,14 @@ class LineTracker:
       not carried (:meth:`_regions`: grown by ``region_margin_px``, on ``region_tile_px``
       tiles, one box per 8-connected group), unless they cover more than
       ``region_max_area`` of the image; the first detection after ``detect_every_max`` frames
-      sees the whole image. A detection that a box side cuts (:meth:`LineDetector.detect_regions`'
-      ``clipped``) claims its track without replacing its extent, or is born. Off by
+      sees the whole image. A detection that a box side cuts (``clipped`` of
+      :meth:`LineDetector.detect_regions`) claims its track without replacing its extent, or
+      is born. Off by
       default. Rendered seeds 0-3 / 4-9, tracked-5 / id switches pooled: 0.930 / 0.56 % and
       0.930 / 0.53 % -> 0.929 / 0.56 % and 0.929 / 0.50 %, endpoint errors 3.65 / 3.67 ->
       3.96 / 4.04 px; cropping busy scenes too (own_centre: detections at the base rate)
       cost 0.925-0.926 and 4.8-5.0 px. The textured real sequences fall back to the whole
-      image (visp_cube's boxes cover 50-100 % of it on 40 px tiles; on 10 px tiles 35-50 %,
+      image (visp_cube's boxes cover 90-100 % of it on 40 px tiles; on 10 px tiles 33-50 %,
       but then 10-15 boxes, ~0.4 ms each outside LSD, saved about nothing).
     * ``n_points``: KLT points per track; ``klt_win``: LK window, px of the LK image, which is
       the input resized by ``klt_scale``; ``klt_levels`` / ``klt_levels_predicted``: pyramid
@@ -928,14 +929,15 @@ class LineTracker:
         cv2.polylines(edges, list(pts), False, 0, 5)      # erase what the tracks explain
         return cv2.countNonZero(edges)
 
-    def _regions(self, seg: np.ndarray, carried: np.ndarray) -> Optional[np.ndarray]:
-        """Boxes ``(B, 4)`` (u0, v0, u1, v1) px to detect in, or None for the whole image.
+    def _regions(self, seg: np.ndarray, carried: np.ndarray
+                 ) -> Tuple[Optional[np.ndarray], float]:
+        """Return the boxes ``(B, 4)`` (u0, v0, u1, v1) px to detect in and their image share.
 
         The edge pixels of the current image (as in :meth:`_uncovered_edges`) that no carried
         track of ``seg`` explains, plus the predicted lines of the tracks not carried (to be
         found again), grown by ``region_margin_px``, on a grid of ``region_tile_px`` tiles;
-        each 8-connected group of tiles is one box. None when they cover more than
-        ``region_max_area`` of the image (a crop would save little there).
+        each 8-connected group of tiles is one box. ``(None, 1.0)`` (the whole image) when
+        they cover more than ``region_max_area`` of the image (a crop would save little).
         """
         mask = self._edges()
         pts = np.round(seg.reshape(-1, 2, 2) * self.klt_scale).astype(np.int32)
@@ -947,20 +949,21 @@ class LineTracker:
         if r > 0:
             mask = cv2.dilate(mask, _square(2 * r + 1))
         h, w = self._shape
-        tile = self.region_tile_px
-        ts = max(int(round(tile * self.klt_scale)), 1)          # a tile in KLT-image pixels
+        ts = max(int(round(self.region_tile_px * self.klt_scale)), 1)   # KLT-image pixels
         nty, ntx = -(-mask.shape[0] // ts), -(-mask.shape[1] // ts)
         grid = np.zeros((nty * ts, ntx * ts), np.uint8)
         grid[:mask.shape[0], :mask.shape[1]] = mask
         on = grid.reshape(nty, ts, ntx, ts).max(axis=(1, 3))
-        n_lab, _, stats, _ = cv2.connectedComponentsWithStats(on, connectivity=8)
+        _, _, stats, _ = cv2.connectedComponentsWithStats(on, connectivity=8)
         st = stats[1:]                                        # label 0 is the background
-        boxes = np.stack([st[:, 0] * tile, st[:, 1] * tile,
-                          np.minimum((st[:, 0] + st[:, 2]) * tile, w),
-                          np.minimum((st[:, 1] + st[:, 3]) * tile, h)], axis=1)
+        # tile edges back in image pixels (KLT-image pixel i covers [i / s, (i + 1) / s))
+        lo = np.floor(st[:, :2] * ts / self.klt_scale).astype(np.int64)
+        hi = np.ceil((st[:, :2] + st[:, 2:4]) * ts / self.klt_scale).astype(np.int64)
+        boxes = np.stack([lo[:, 0], lo[:, 1], np.minimum(hi[:, 0], w),
+                          np.minimum(hi[:, 1], h)], axis=1)
         boxes = boxes[(boxes[:, 2] > boxes[:, 0]) & (boxes[:, 3] > boxes[:, 1])]
-        area = float(np.sum((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])))
-        return None if area > self.region_max_area * h * w else boxes
+        area = float(np.sum((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1]))) / (h * w)
+        return (None, 1.0) if area > self.region_max_area else (boxes, area)
 
     def _detect_now(self, t_n: int, uncarried: int, seg: np.ndarray) -> bool:
         """Whether the detector runs now: ``t_n`` tracks at ``seg``, ``uncarried`` of them lost."""
@@ -1046,15 +1049,14 @@ class LineTracker:
             # track's extent; a detection of its own then, one frame after a crop, counted
             # its few births as a busy scene's and brought back the base rate)
             quiet = self._interval > self.detect_every
-            boxes = (self._regions(seg, carried) if self.detect_regions and t_n > 0 and quiet
-                     and self._frame >= top and self._since_full < top else None)
+            boxes, area = (self._regions(seg, carried) if self.detect_regions and t_n > 0
+                           and quiet and self._frame >= top and self._since_full < top
+                           else (None, 1.0))
             if boxes is None:
-                det, area = self.detector.detect(gray), 1.0
+                det = self.detector.detect(gray)
                 self._since_full = 0
             else:
                 det, clipped = self.detector.detect_regions(gray, boxes)
-                area = float(np.sum((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1]))
-                             / gray.size)
         t2 = tick()
         det = det.astype(np.float64)
         owner = self._associate(seg, det, ~carried)
