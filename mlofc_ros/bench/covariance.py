@@ -141,13 +141,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
     t0 = time.monotonic()
+    rev = common.git_revision('mlofc_ros')      # the whole package, before the runs import it
     items = [(c, seed, args.frames) for c in args.configs for seed in args.seed_list]
     records = common.run_parallel(run_one, items, args.jobs, what='runs')
-    rev = common.git_revision('mlofc_ros/solver', 'mlofc_ros/pipeline.py')
     text = '\n'.join([
         common.run_header('Angular-velocity covariance: NEES on rendered scenes',
                           common.command_line('covariance', argv), {
-                              'Solver/pipeline revision': rev,
+                              'Code revision (mlofc_ros, at the start)': rev,
                               'Sequences': f'{args.frames} frames 640x480 at 30 Hz, render '
                                            f'seeds {args.seeds}, every frame solved',
                               'Run time': f'{time.monotonic() - t0:.0f} s'}),
