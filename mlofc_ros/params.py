@@ -123,10 +123,10 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               'Detection on demand in a quiet scene (the interval has grown past '
               'detect_every): run the detector only on the image regions whose edges no track '
               'explains and around lost tracks, when they cover at most half of the image; the '
-              'whole image at least every detect_every_max frames, in the first '
+              'whole image at the first detection after detect_every_max frames, in the first '
               'detect_every_max frames and while the scene is busy. Saves most of the detector '
-              'on a static camera watching a few moving objects, for segment endpoints about '
-              '10% further off; textured or moving views fall back to the whole image.'),
+              'on a static camera watching a few moving objects, for segment endpoints 10-12% '
+              'further off; textured or moving views fall back to the whole image.'),
     ParamSpec('detector_scale', float, 0.8,
               'The line detector runs on the image resized by this factor (area average). '
               'With lsd, 0.8 tracks as many edges as full resolution (1.0) for about a quarter '

@@ -395,12 +395,11 @@ class LineTracker:
       ``region_max_area`` of the image; the first detection after ``detect_every_max`` frames
       sees the whole image. A detection that a box side cuts (``clipped`` of
       :meth:`LineDetector.detect_regions`) claims its track without replacing its extent, or
-      is born. Off by
-      default. Rendered seeds 0-3 / 4-9, tracked-5 / id switches pooled: 0.930 / 0.56 % and
-      0.930 / 0.53 % -> 0.929 / 0.56 % and 0.929 / 0.50 %, endpoint errors 3.65 / 3.67 ->
-      3.96 / 4.04 px; cropping busy scenes too (own_centre: detections at the base rate)
-      cost 0.925-0.926 and 4.8-5.0 px. The textured real sequences fall back to the whole
-      image (visp_cube's boxes cover 90-100 % of it on 40 px tiles; on 10 px tiles 33-50 %,
+      is born. Off by default. Rendered seeds 0-3 / 4-9, tracked-5 / id switches pooled:
+      0.930 / 0.56 % and 0.930 / 0.53 % -> 0.929 / 0.56 % and 0.929 / 0.51 %, endpoint errors
+      3.65 / 3.67 -> 4.08 / 4.05 px; cropping busy scenes too (own_centre: detections at the
+      base rate) cost 0.925-0.926 and 4.8-5.0 px. The textured real sequences fall back to the
+      whole image (visp_cube's boxes cover 90-100 % of it on 40 px tiles; on 10 px tiles 33-50 %,
       but then 10-15 boxes, ~0.4 ms each outside LSD, saved about nothing).
     * ``n_points``: KLT points per track; ``klt_win``: LK window, px of the LK image, which is
       the input resized by ``klt_scale``; ``klt_levels`` / ``klt_levels_predicted``: pyramid
@@ -1044,7 +1043,7 @@ class LineTracker:
             top = max(self.detect_every_max, self.detect_every)
             # only where something is new, in a quiet scene (the interval has grown) once the
             # track set is built; the whole image while the scene is busy (cropped, the
-            # extents of a busy scene went stale: endpoint errors +31-37% instead of +8-10%)
+            # extents of a busy scene went stale: endpoint errors +31-37% instead of +10-12%)
             # and at the first detection after detect_every_max frames (it refreshes every
             # track's extent; a detection of its own then, one frame after a crop, counted
             # its few births as a busy scene's and brought back the base rate)
