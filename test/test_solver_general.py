@@ -248,6 +248,26 @@ def test_published_rotation_is_refit_without_changing_the_segmentation(monkeypat
     seg, pub = np.array(errors).T
     # the direction prior's pull on W (0.3-2.6% of |w| here) mostly gone from the published one
     assert np.all(pub <= seg + 1e-3) and pub.mean() < 0.5 * seg.mean()
+    # a refit that fails publishes the segmentation's motion: a non-finite refit ...
+    obs = LineObservations(tracks, (F, F, C, C))
+    W, T = plain.angular_velocities, np.array([[0.0, 0.0, 0.1]])
+    with monkeypatch.context() as m:
+        m.setattr(core, 'polish_body', lambda obs, idx, w, t, *a: (w * np.nan, t, 0.0))
+        W_pub, T_pub = core._published_motions(obs, plain.labels, W, T, 0.01)
+    assert np.array_equal(W_pub, W) and np.array_equal(T_pub, T)
+    # ... and one without a covariance (with the covariance at the segmentation's motion)
+    real = core.body_covariance
+    calls = []
+
+    def first_without(*args, **kwargs):
+        calls.append(args[2])
+        return np.full((3, 3), np.nan) if len(calls) == 1 else real(*args, **kwargs)
+    with monkeypatch.context() as m:
+        m.setattr(core, 'body_covariance', first_without)
+        failed = segment_lines(tracks, 1, intrinsics=(F, F, C, C), method='general')
+    assert len(calls) == 2
+    assert np.array_equal(failed.angular_velocities, plain.angular_velocities)
+    assert np.array_equal(failed.angular_covariances, plain.angular_covariances)
 
 
 def test_robust_cost_keeps_a_fit_on_the_body_despite_a_few_gross_tracks():

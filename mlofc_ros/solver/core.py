@@ -502,9 +502,15 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
                 fit = alt if alt[2] < (1.0 - margin) * fit[2] else fit
             sol['W'][b], sol['T'][b] = fit[0], fit[1]
     W_pub, T_pub = _published_motions(obs, labels, sol['W'], sol['T'], sigma2)
-    cov = np.stack([body_covariance(obs, np.flatnonzero(labels == b), W_pub[b], T_pub[b],
-                                    sigma2, marginal=True)
-                    for b in range(n)])
+    cov = np.empty((n, 3, 3))
+    for b in range(n):                                    # bodies, not lines
+        idx = np.flatnonzero(labels == b)
+        cov[b] = body_covariance(obs, idx, W_pub[b], T_pub[b], sigma2, marginal=True)
+        if not np.all(np.isfinite(cov[b])) and not np.array_equal(W_pub[b], sol['W'][b]):
+            # a refit without a covariance is not published (nor would it decide, through the
+            # pipeline's validity, which bodies are tracked): the segmentation's motion
+            W_pub[b], T_pub[b] = sol['W'][b], sol['T'][b]
+            cov[b] = body_covariance(obs, idx, W_pub[b], T_pub[b], sigma2, marginal=True)
     scale = np.linalg.norm(sol['T'], axis=1)
     with np.errstate(invalid='ignore', divide='ignore'):
         best = sol['costs'][np.arange(arr.shape[0]),
@@ -525,8 +531,8 @@ def _published_motions(obs: LineObservations, labels: np.ndarray, W: np.ndarray,
     """Return the motions ``(W (n, 3), T (n, 3))`` that 'general' publishes.
 
     Each body's refit from ``W, T`` (the segmentation's, at noise ``sigma2`` px^2) on its
-    ``labels`` at :data:`PUBLISH_NOISE_SCALE` of that noise; bodies with fewer than 3 lines,
-    or all of them when it is None, keep ``W, T``.
+    ``labels`` at :data:`PUBLISH_NOISE_SCALE` of that noise; bodies with fewer than 3 lines
+    or a non-finite refit, or all of them when it is None, keep ``W, T``.
     """
     W_pub, T_pub = W.copy(), T.copy()
     if PUBLISH_NOISE_SCALE is None:
@@ -535,8 +541,9 @@ def _published_motions(obs: LineObservations, labels: np.ndarray, W: np.ndarray,
     for b in range(W.shape[0]):                          # bodies, not lines
         idx = np.flatnonzero(labels == b)
         if idx.size >= 3:
-            W_pub[b], T_pub[b], _ = polish_body(obs, idx, W[b], T[b], POLISH_ITERATIONS, s2,
-                                                s2)
+            w, t, _ = polish_body(obs, idx, W[b], T[b], POLISH_ITERATIONS, s2, s2)
+            if np.all(np.isfinite(w)) and np.all(np.isfinite(t)):
+                W_pub[b], T_pub[b] = w, t
     return W_pub, T_pub
 
 
