@@ -638,7 +638,7 @@ class Pipeline:
             cov = cov / interval ** 2
             lab = np.asarray(res.labels).astype(np.int64)
             support = np.bincount(lab[lab >= 0], minlength=len(omega))[:len(omega)]
-            valid = (np.all(np.isfinite(omega), axis=1) & np.all(np.isfinite(published), axis=1)
+            valid = (np.all(np.isfinite(omega), axis=1)
                      & np.all(np.isfinite(cov.reshape(len(cov), -1)), axis=1)
                      & (support >= MIN_BODY_TRACKS))
             mid = None

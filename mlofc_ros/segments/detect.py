@@ -44,6 +44,12 @@ def has_ximgproc() -> bool:
     return hasattr(cv2, 'ximgproc')
 
 
+def check_gray(gray: np.ndarray) -> None:
+    """Raise ``ValueError`` unless ``gray`` is a (H, W) uint8 image."""
+    if gray.ndim != 2 or gray.dtype != np.uint8:
+        raise ValueError(f'expected a (H, W) uint8 gray image, got {gray.dtype} {gray.shape}')
+
+
 def segment_lengths(segments: np.ndarray) -> np.ndarray:
     """Return the lengths (M,) in pixels of segments ``(M, 4)``."""
     s = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
@@ -620,9 +626,7 @@ class LineDetector:
         when ``bridge``, and at least ``min_length`` px long. Raises ``ValueError`` for a
         non-2D or non-uint8 image.
         """
-        if gray.ndim != 2 or gray.dtype != np.uint8:
-            raise ValueError(f'expected a (H, W) uint8 gray image, got {gray.dtype} '
-                             f'{gray.shape}')
+        check_gray(gray)
         raw = self._impl(gray)
         if raw is None or len(raw) == 0:
             return np.zeros((0, 4), np.float32)
@@ -671,9 +675,7 @@ class LineDetector:
         image of the boxes' total area; orientation, merging and bridging add ~0.4 ms per box
         (640x480 real frames), so many small boxes save little.
         """
-        if gray.ndim != 2 or gray.dtype != np.uint8:
-            raise ValueError(f'expected a (H, W) uint8 gray image, got {gray.dtype} '
-                             f'{gray.shape}')
+        check_gray(gray)
         b = np.asarray(boxes, dtype=np.int64).reshape(-1, 4)
         h, w = gray.shape
         if b.size and (b[:, 0].min() < 0 or b[:, 1].min() < 0 or b[:, 2].max() > w

@@ -49,7 +49,7 @@ from typing import Dict, NamedTuple, Optional, Tuple, Union
 import cv2
 import numpy as np
 
-from mlofc_ros.segments.detect import _angle_pairs, _square, LineDetector
+from mlofc_ros.segments.detect import _angle_pairs, _square, check_gray, LineDetector
 
 
 def _tls_by_group(px: np.ndarray, py: np.ndarray, w: np.ndarray, g: np.ndarray, k: int,
@@ -561,6 +561,7 @@ class LineTracker:
         self._cur: Optional[np.ndarray] = None
         self._small_prev: Optional[np.ndarray] = None
         self._small_cur: Optional[np.ndarray] = None
+        self._edges_cur: Optional[np.ndarray] = None       # this frame's :meth:`_edges`
         self._shape: Optional[Tuple[int, int]] = None
         self._frame = 0
         self._since_detect = 0                # frames since the detector last ran
@@ -914,10 +915,12 @@ class LineTracker:
 
         255 where ``|Sobel x| + |Sobel y|`` exceeds ``edge_threshold`` grey levels.
         """
-        small = self._small('cur')
-        mag = cv2.add(cv2.convertScaleAbs(cv2.Sobel(small, cv2.CV_16S, 1, 0)),
-                      cv2.convertScaleAbs(cv2.Sobel(small, cv2.CV_16S, 0, 1)))
-        return cv2.compare(mag, self.edge_threshold, cv2.CMP_GT)
+        if self._edges_cur is None:      # once per frame: the checks and the regions share it
+            small = self._small('cur')
+            mag = cv2.add(cv2.convertScaleAbs(cv2.Sobel(small, cv2.CV_16S, 1, 0)),
+                          cv2.convertScaleAbs(cv2.Sobel(small, cv2.CV_16S, 0, 1)))
+            self._edges_cur = cv2.compare(mag, self.edge_threshold, cv2.CMP_GT)
+        return self._edges_cur.copy()    # callers draw on it
 
     def _uncovered_edges(self, seg: np.ndarray) -> int:
         """Edge pixels of the current image (at ``klt_scale``) farther than ~2 px from ``seg``."""
@@ -1003,16 +1006,14 @@ class LineTracker:
         ``ValueError`` on a non-uint8/non-2D image or a change of image size (call
         :meth:`reset` first).
         """
-        if gray.ndim != 2 or gray.dtype != np.uint8:
-            raise ValueError(f'expected a (H, W) uint8 gray image, got {gray.dtype} '
-                             f'{gray.shape}')
+        check_gray(gray)
         if self._shape is not None and gray.shape != self._shape:
             raise ValueError(f'image size changed from {self._shape} to {gray.shape}; '
                              'reset() the tracker first')
         tick = cv2.getTickCount
         t0 = tick()
         self._shape = gray.shape
-        self._cur, self._small_cur = gray, None
+        self._cur, self._small_cur, self._edges_cur = gray, None, None
         image = gray.astype(np.float32)
         seg, carried = self._carry(gray, image)
         t_n = seg.shape[0]
@@ -1114,7 +1115,7 @@ class LineTracker:
             self._uncovered_after = self._uncovered_edges(self._seg)
         self._prev = gray.copy()
         self._small_prev = self._small_cur
-        self._cur = self._small_cur = None
+        self._cur = self._small_cur = self._edges_cur = None
         self._frame += 1
         out_ids, out_seg = self._ids[report], self._seg[report]
         order = np.argsort(out_ids, kind='stable')
