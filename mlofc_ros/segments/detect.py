@@ -685,25 +685,18 @@ class LineDetector:
                              f'got {b.tolist()}')
         # the crops have other shapes than whole frames: their buffers apart from the frames'
         scratch, self._scratch = self._scratch, self._region_scratch
+        segs, cuts = [np.zeros((0, 4), np.float32)], [np.zeros(0, bool)]
         try:
-            parts = []
             for u0, v0, u1, v1 in b:                     # a few regions, not lines
                 seg = self.detect(np.ascontiguousarray(gray[v0:v1, u0:u1]))
                 seg[:, 0::2] += u0
                 seg[:, 1::2] += v0
-                parts.append((seg, (u0, v0, u1, v1)))
+                u, v = seg[:, 0::2].astype(np.float64), seg[:, 1::2].astype(np.float64)
+                # pixel centres of the box run from u0 to u1 - 1; image borders cut nothing
+                cut = (((u0 > 0) & (u < u0 + clip_px)) | ((u1 < w) & (u > u1 - 1 - clip_px))
+                       | ((v0 > 0) & (v < v0 + clip_px)) | ((v1 < h) & (v > v1 - 1 - clip_px)))
+                segs.append(seg)
+                cuts.append(cut.any(axis=1))
         finally:
             self._region_scratch, self._scratch = self._scratch, scratch
-        if not parts:
-            return np.zeros((0, 4), np.float32), np.zeros(0, bool)
-        seg = np.concatenate([p[0] for p in parts])
-        edges = np.concatenate([np.repeat([p[1]], p[0].shape[0], axis=0) for p in parts]
-                               ).astype(np.float64).reshape(-1, 4)
-        u0, v0, u1, v1 = edges.T
-        u, v = seg[:, 0::2].astype(np.float64), seg[:, 1::2].astype(np.float64)   # (M, 2)
-        # pixel centres of a box run from u0 to u1 - 1; image borders cut nothing
-        cut = (((u0 > 0)[:, None] & (u < (u0 + clip_px)[:, None]))
-               | ((u1 < w)[:, None] & (u > (u1 - 1 - clip_px)[:, None]))
-               | ((v0 > 0)[:, None] & (v < (v0 + clip_px)[:, None]))
-               | ((v1 < h)[:, None] & (v > (v1 - 1 - clip_px)[:, None])))
-        return np.ascontiguousarray(seg, dtype=np.float32), cut.any(axis=1)
+        return np.ascontiguousarray(np.concatenate(segs), dtype=np.float32), np.concatenate(cuts)
