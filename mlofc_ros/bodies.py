@@ -14,9 +14,12 @@
 """Stable body ids over time.
 
 The solver numbers its bodies arbitrarily in every window. :class:`BodyTracker` maps them onto
-stable ids: body ``i`` of this window gets the id of the previous body that shares most of its
-tracks (the tracker's track ids carry their previous label across windows) and, second, whose
-angular velocity is closest. The assignment is exact (maximum total score over all permutations;
+stable ids: body ``i`` of this window gets the id its tracks were given most often over their
+lives (the tracker's track ids carry their labels across windows) and, second, the id whose
+angular velocity is closest. A track votes with its whole history, not its last label, so that
+a few windows of wrong labels (a body fitted in a wrong basin takes a neighbour's lines, and the
+last labels rotate through the ids) do not hand the ids on: when the solver recovers, its
+bodies get their old ids back. The assignment is exact (maximum total score over all permutations;
 ``n <= 8`` bodies). The first window numbers bodies by decreasing image extent (bounding box of
 their tracks; track count when positions are not given), so the background, which spans the
 image, is usually body 0; body ``i`` keeps its id while it is seen.
@@ -112,6 +115,7 @@ class BodyTracker:
         self._track_ids = np.zeros(0, dtype=np.int64)      # sorted
         self._track_labels = np.zeros(0, dtype=np.int64)
         self._track_ages = np.zeros(0, dtype=np.int64)     # updates since the solver assigned it
+        self._track_votes = np.zeros((0, 0), dtype=np.int64)  # (tracks, ids): times given each id
 
     @property
     def track_labels(self) -> Dict[int, int]:
@@ -206,12 +210,20 @@ class BodyTracker:
 
     def _score(self, ids: np.ndarray, lab: np.ndarray, w: np.ndarray, valid: np.ndarray,
                n: int) -> np.ndarray:
-        """(n, n_slots) score: shared-track fraction + omega_weight * omega similarity."""
+        """(n, n_slots) score: shared-track fraction + omega_weight * omega similarity.
+
+        The shared-track fraction of body ``i`` and id ``j``: the mean, over the tracks of
+        body ``i`` that have a history, of the share of that history spent with id ``j``.
+        """
         slots = self.n_slots
-        prev = self.previous_labels(ids)
-        both = (lab >= 0) & (prev >= 0) & (prev < slots)
-        overlap = np.bincount(lab[both] * slots + prev[both],
-                              minlength=n * slots).astype(float).reshape(n, slots)
+        pos, hit = self._find(ids)
+        hit &= lab >= 0
+        overlap = np.zeros((n, slots))
+        if np.any(hit):
+            votes = self._track_votes[pos[hit], :slots].astype(float)
+            total = votes.sum(axis=1, keepdims=True)
+            share = votes / np.maximum(total, 1.0)
+            np.add.at(overlap, lab[hit], share)
         overlap /= np.maximum(overlap.sum(axis=1, keepdims=True), 1.0)
         sim = np.zeros((n, slots))
         if self._omegas:
@@ -227,19 +239,25 @@ class BodyTracker:
     def _remember(self, ids: np.ndarray, lab: np.ndarray, w: np.ndarray, valid: np.ndarray,
                   mapping: np.ndarray) -> None:
         stable = relabel(lab, mapping)
+        self.n_slots = max(self.n_slots, int(mapping.max()) + 1)
         pos, hit = self._find(ids)
         prev = np.where(hit, self._track_labels[pos] if self._track_labels.size else -1, -1)
         age = np.where(hit, self._track_ages[pos] if self._track_ages.size else 0, 0)
-        carried = np.where(stable >= 0, stable, prev)   # unassigned now: keep the old label
-        ages = np.where(stable >= 0, 0, age + 1)
+        votes = np.zeros((ids.size, self.n_slots), dtype=np.int64)
+        old = self._track_votes
+        votes[hit, :old.shape[1]] = old[pos[hit]]
+        now = stable >= 0
+        votes[np.flatnonzero(now), stable[now]] += 1
+        carried = np.where(now, stable, prev)           # unassigned now: keep the old label
+        ages = np.where(now, 0, age + 1)
         keep = carried >= 0
         order = np.argsort(ids[keep], kind='stable')
         self._track_ids = ids[keep][order]
         self._track_labels = carried[keep][order]
         self._track_ages = ages[keep][order]
+        self._track_votes = votes[keep][order]
         for j in np.flatnonzero(valid):
             self._omegas[int(mapping[j])] = w[j].copy()
-        self.n_slots = max(self.n_slots, int(mapping.max()) + 1)
 
     def state(self) -> Tuple[int, Dict[int, np.ndarray]]:
         """Return ``(number of stable ids so far, {stable id: last angular velocity})``."""

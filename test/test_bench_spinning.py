@@ -46,7 +46,7 @@ def test_score_run_counts_wrong_unassigned_and_omega_errors():
     s = spinning.score_run(seq, outs, first=1)
     assert s['matched'] == 8                     # the fifth segment lies on no true edge
     assert s['mapping'] == {1: 0, 0: 1}
-    assert s['wrong'] == 1 / 8 and s['unassigned'] == 1 / 8
+    assert s['wrong'] == 1 / 8 and s['unassigned'] == 1 / 8 and s['wrong_frame'] == 1 / 8
     assert np.isnan(s['omega_err'][0]) and abs(s['omega_err'][1] - 0.1) < 1e-12
     # the box's pivot is on the x axis: the line-of-sight component of (0, 0, 2) is zero
     assert abs(s['los_err'][1] - 1.0) < 1e-12
@@ -54,10 +54,19 @@ def test_score_run_counts_wrong_unassigned_and_omega_errors():
     assert list(s['ms']) == [10.0, 30.0]
     row = spinning.build_rows([{'scene': 'x', 'seed': 0, 'method': 'robust', 'window': 5,
                                 'score': s}])[0]
-    assert row[4] == 12.5 and row[6] == '10' and row[9] == 20.0
+    assert row[4] == 12.5 and row[5] == 12.5 and row[7] == '10' and row[10] == 20.0
     rec = {'scene': 'x', 'seed': 0, 'method': 'robust', 'window': 5, 'score': s}
     summary = spinning.summary_rows([rec, dict(rec, seed=1)])
     assert len(summary) == 1 and summary[0][3] == 2 and summary[0][4] == 12.5
+    assert summary[0][6] == 12.5
+
+
+def test_score_run_per_frame_leaves_out_id_switches():
+    seq = _scene()
+    right, swapped = _frame([0, 0, 1, 1, 1], [0.0, 0, 2.0]), _frame([1, 1, 0, 0, 1], [0.0, 0, 2])
+    s = spinning.score_run(seq, [(right, 1.0), (right, 1.0), (swapped, 1.0)], first=0)
+    assert s['mapping'] == {0: 0, 1: 1}
+    assert s['wrong'] == 4 / 12 and s['wrong_frame'] == 0.0
 
 
 def test_spinning_is_registered():
