@@ -80,9 +80,10 @@ def run_pipeline(seq, method: str, window: int, params: Optional[Dict[str, objec
 def score_run(seq, outs: Sequence[Tuple[object, float]], first: int) -> Dict[str, object]:
     """Scores of a run (frames ``>= first``), see the module docstring.
 
-    Returns ``wrong``, ``unassigned``, ``wrong_frame`` (fractions of ``matched``), ``omega_err`` (per true body,
-    relative; NaN for static bodies), ``los_err`` (per body), ``static_deg_s`` (per body, |w|
-    of static bodies), ``ms`` (CPU ms per scored frame) and ``mapping``.
+    Returns ``wrong``, ``unassigned``, ``wrong_frame`` (fractions of ``matched``),
+    ``omega_err`` (per true body, relative; NaN for static bodies), ``los_err`` (per body),
+    ``static_deg_s`` (per body, |w| of static bodies), ``ms`` (CPU ms per scored frame) and
+    ``mapping``.
     """
     from mlofc_ros.demo import match_bodies, match_segments
     n_gt = len(seq.body_names)
@@ -206,11 +207,12 @@ def summary_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
 
 
 SUMMARY_HEADERS = ['scene', 'method', 'window', 'seeds', 'wrong % (mean)', 'wrong % (worst)',
-                   'per frame (mean)', '-1 % (mean)', 'omega err % (median over boxes)', 'boxes with omega err <= 5%',
-                   'ms/frame median']
+                   'per frame (mean)', '-1 % (mean)', 'omega err % (median over boxes)',
+                   'boxes with omega err <= 5%', 'ms/frame median']
 
-HEADERS = ['scene', 'seed', 'method', 'window', 'wrong %', 'per frame', '-1 %', 'omega err % (boxes)',
-           'LOS err % (boxes)', 'static |w| deg/s', 'ms/frame median', 'p95', 'max']
+HEADERS = ['scene', 'seed', 'method', 'window', 'wrong %', 'per frame', '-1 %',
+           'omega err % (boxes)', 'LOS err % (boxes)', 'static |w| deg/s', 'ms/frame median',
+           'p95', 'max']
 
 
 def plot(path, records: Sequence[Dict[str, object]]) -> None:
