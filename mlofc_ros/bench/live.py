@@ -222,6 +222,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from mlofc_ros.render import render_sequence
     t0 = time.monotonic()
     load = os.getloadavg()
+    from mlofc_ros.bench.pipeline import code_revisions
+    revisions = code_revisions()        # before the runs: the code they ran
     records = []
     with tempfile.TemporaryDirectory(prefix='mlofc_live_') as tmp:
         for scene in args.scene_list:
@@ -235,11 +237,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     records.append(rec)
                     common.eprint('live: ' + ' '.join(common.format_number(c)
                                                       for c in build_rows([rec])[0]))
-    from mlofc_ros.bench.pipeline import code_revisions
     text = '\n'.join([
         common.run_header('Spinning boxes through the running node, published in real time',
                           common.command_line('live', argv), {
-                              'Code': code_revisions(),
+                              'Code': revisions,
                               'Node': f'`method:={args.method} window:={args.window} '
                                       'queue_size:=2`, camera_info given; a fresh node per run',
                               'Sequences': f'{args.frames} frames 640x480 per run (image '

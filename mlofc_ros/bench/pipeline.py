@@ -59,9 +59,14 @@ class Sequence_(SimpleNamespace):
 
 
 def code_revisions() -> str:
-    """Last commits (``+dirty`` if edited) of the code this benchmark runs, for the report."""
+    """Last commits (``+dirty`` if edited) of the code this benchmark runs, for the report.
+
+    The whole package first: a module left out of the list (``bodies.py`` was, session 20)
+    would change the results under an unchanged revision.
+    """
     return ', '.join(f'{name} {common.git_revision(path)}' for name, path in (
-        ('pipeline', 'mlofc_ros/pipeline.py'), ('solver', 'mlofc_ros/solver'),
+        ('mlofc_ros', 'mlofc_ros'), ('pipeline', 'mlofc_ros/pipeline.py'),
+        ('solver', 'mlofc_ros/solver'),
         ('tracks', 'mlofc_ros/tracks'), ('detect', 'mlofc_ros/segments'),
         ('node', 'mlofc_ros/node.py')))
 
