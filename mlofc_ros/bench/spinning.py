@@ -77,6 +77,14 @@ def run_pipeline(seq, method: str, window: int, params: Optional[Dict[str, objec
     return out
 
 
+def _mapped(lab: np.ndarray, mapping: Dict[int, int], n_lab: int) -> np.ndarray:
+    """True body of every label through ``mapping`` (``-2`` for -1 and unmapped labels)."""
+    lut = np.full(n_lab + 1, -2, dtype=np.int64)      # the last entry serves label -1
+    for label, g in mapping.items():                  # bodies, not segments
+        lut[label] = g
+    return lut[np.where(lab >= 0, lab, n_lab)]
+
+
 def score_run(seq, outs: Sequence[Tuple[object, float]], first: int) -> Dict[str, object]:
     """Scores of a run (frames ``>= first``), see the module docstring.
 
@@ -101,16 +109,15 @@ def score_run(seq, outs: Sequence[Tuple[object, float]], first: int) -> Dict[str
     ok = lab >= 0
     np.add.at(conf, (lab[ok], gt[ok]), 1)
     mapping = match_bodies(conf)
-    mapped = np.array([mapping.get(int(x), -2) for x in lab], dtype=np.int64)
+    mapped = _mapped(lab, mapping, n_lab)
     n = max(len(lab), 1)
     wrong = float(np.sum(ok & (mapped != gt))) / n
     wrong_frame = 0
     for lab_f, gt_f in zip(labs, gts):                    # frames, not segments
         conf_f = np.zeros((n_lab, n_gt), dtype=np.int64)
         np.add.at(conf_f, (lab_f[lab_f >= 0], gt_f[lab_f >= 0]), 1)
-        map_f = match_bodies(conf_f)
-        wrong_frame += int(np.sum((lab_f >= 0) & (np.array(
-            [map_f.get(int(x), -2) for x in lab_f], dtype=np.int64) != gt_f)))
+        wrong_frame += int(np.sum((lab_f >= 0)
+                                  & (_mapped(lab_f, match_bodies(conf_f), n_lab) != gt_f)))
     unassigned = float(np.sum(~ok)) / n
     omega_err = np.full(n_gt, np.nan)
     los_err = np.full(n_gt, np.nan)
