@@ -78,7 +78,7 @@ def run_pipeline(seq, method: str, window: int, params: Optional[Dict[str, objec
 
 
 def _mapped(lab: np.ndarray, mapping: Dict[int, int], n_lab: int) -> np.ndarray:
-    """True body of every label through ``mapping`` (``-2`` for -1 and unmapped labels)."""
+    """Map every label to its true body through ``mapping`` (``-2``: -1 and unmapped labels)."""
     lut = np.full(n_lab + 1, -2, dtype=np.int64)      # the last entry serves label -1
     for label, g in mapping.items():                  # bodies, not segments
         lut[label] = g
