@@ -75,6 +75,18 @@ GENERAL_MIN_FRAMES = 5
 WARM_FLOOR_MARGIN = 0.05
 WARM_FLOOR_SOLVES = 10
 
+#: Method 'general': every tracked body is refitted from the pivot starts at every warm solve
+#: (``segment_lines(..., rescan=...)``), not one body per solve in turn. A body tracked in a
+#: wrong basin then gets its way out at the next solve instead of after up to ``num_bodies``
+#: of them, and the solver's path no longer depends on how the body ids are numbered (the
+#: turn went by id, so ids that changed hands changed which body was searched; the warm path
+#: itself is numbering-blind). Spinning benchmark, window 10, 30 frames, render seeds 0-11,
+#: mean wrong % own2+bg / own3+bg / own2 / own3, one in turn -> all: 4.5 / 6.0 / 0.19 / 2.1
+#: -> 3.1 / 4.7 / 0.18 / 1.1; the gains are on the runs that start in a wrong basin (own2+bg
+#: s6 13.5 -> 4.4, s9 9.7 -> 2.9, own3+bg s3 22.3 -> 16.9, s9 15.9 -> 3.0, own3 s2 22.9 ->
+#: 10.2), the losses within 1.6 points. More CPU per warm solve (session 21, docs/design.md).
+RESCAN_EVERY_BODY = True
+
 
 @dataclass
 class FrameResult:
@@ -599,8 +611,11 @@ class Pipeline:
                     for body, (w_b, t_b) in self._motions.items():
                         if body < n_req:
                             motions[0][body], motions[1][body] = w_b, t_b
-                    rescan = [self._rescan % n_req]
-                    self._rescan = (self._rescan + 1) % n_req
+                    if RESCAN_EVERY_BODY:
+                        rescan = list(range(n_req))
+                    else:
+                        rescan = [self._rescan % n_req]
+                        self._rescan = (self._rescan + 1) % n_req
             warm_inliers = None
             # 'robust' only: 'general' (and its first frames, answered by 'robust') keeps the
             # rotation-only step as tuned (see segment_lines' warm_competes)

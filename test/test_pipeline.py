@@ -570,9 +570,9 @@ def test_labels_are_stable_over_time():
     assert changes / total < 0.01
 
 
-def test_general_rescans_one_body_per_frame_in_turn(monkeypatch):
+def test_general_rescans_every_tracked_body_at_every_warm_solve(monkeypatch):
     # a body tracked in a wrong basin keeps it through the warm starts unless its fit is
-    # searched again now and then: the pipeline asks for one body per frame, in turn
+    # searched again: the pipeline asks for every body at every warm solve (RESCAN_EVERY_BODY)
     import mlofc_ros.pipeline as pipeline_module
     seq = small_sequence()
     asked = []
@@ -581,6 +581,14 @@ def test_general_rescans_one_body_per_frame_in_turn(monkeypatch):
         asked.append(kwargs.get('rescan'))
         return segment_lines(*args, **kwargs)
     monkeypatch.setattr(pipeline_module, 'segment_lines', spy)
+    p = Pipeline(num_bodies=2, window=3, method='general')
+    for img, t in zip(seq.frames[:6], seq.stamps[:6]):
+        p.process(img, t, seq.camera)
+    warm = [r for r in asked if r is not None]
+    assert len(warm) >= 3 and all(r == [0, 1] for r in warm)
+    # the former schedule, one body per solve in turn, stays available
+    monkeypatch.setattr(pipeline_module, 'RESCAN_EVERY_BODY', False)
+    asked.clear()
     p = Pipeline(num_bodies=2, window=3, method='general')
     for img, t in zip(seq.frames[:6], seq.stamps[:6]):
         p.process(img, t, seq.camera)

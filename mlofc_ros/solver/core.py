@@ -298,7 +298,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         by :data:`RESCAN_MARGIN` (:data:`RESCAN_MARGIN_ROBUST` on the robust cost of
         :data:`GENERAL_ROBUST_POLISH`). A body tracked in a wrong basin (a wrong pivot, the
         depth-reversed motion) otherwise keeps it window after window. The labels follow in
-        the next window. The pipeline rescans one body per frame in turn.
+        the next window. The pipeline rescans every tracked body at every warm solve
+        (:data:`mlofc_ros.pipeline.RESCAN_EVERY_BODY`).
     warm_inliers : float, optional
         'robust' only, with ``init_labels``: the share
         of the usable tracks that the previous labels' final pass must keep as inliers to be
