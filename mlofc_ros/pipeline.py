@@ -84,7 +84,8 @@ WARM_FLOOR_SOLVES = 10
 #: mean wrong % own2+bg / own3+bg / own2 / own3, one in turn -> all: 4.5 / 6.0 / 0.19 / 2.1
 #: -> 3.1 / 4.7 / 0.18 / 1.1; the gains are on the runs that start in a wrong basin (own2+bg
 #: s6 13.5 -> 4.4, s9 9.7 -> 2.9, own3+bg s3 22.3 -> 16.9, s9 15.9 -> 3.0, own3 s2 22.9 ->
-#: 10.2), the losses within 1.6 points. More CPU per warm solve (session 21, docs/design.md).
+#: 10.2), the losses within 1.6 points. +32% CPU per frame with 4 bodies (session 21,
+#: docs/design.md).
 RESCAN_EVERY_BODY = True
 
 
