@@ -20,7 +20,8 @@ from mlofc_ros.solver import segment_lines
 from mlofc_ros.solver.general import (_lm_runs, _pivot_translation, fit_body,
                                       fit_body_multistart, general_warm, line_residuals,
                                       LineObservations, marginal_residuals,
-                                      marginal_segmentation, necker_mirror, position_costs)
+                                      marginal_segmentation, necker_mirror, PIVOT_KEEP,
+                                      pivot_picks, PIVOT_RATES, PIVOT_W, position_costs)
 from mlofc_ros.solver.lines import rotation_matrix
 
 
@@ -76,6 +77,24 @@ def test_pivot_starts_and_the_necker_check_find_a_small_spinning_body():
         alone, _, _ = fit_body_multistart(obs, idx, np.zeros(3))
         missed += np.linalg.norm(alone - w) / np.linalg.norm(w) > 0.2
     assert missed >= 2
+
+
+def test_pivot_picks_can_take_the_best_start_of_every_rate():
+    # before any LM step the slow starts scan cheapest; per rate, the best start at each
+    # rate is refined, where a fast body's true rate would otherwise never be tried
+    k = PIVOT_RATES.size
+    rate = np.linalg.norm(PIVOT_W, axis=1)
+    assert np.allclose(rate, PIVOT_RATES[np.arange(PIVOT_W.shape[0]) % k])
+    rng = np.random.default_rng(0)
+    scan = rate * 100.0 + rng.random(rate.size)          # cheaper the slower
+    top = pivot_picks(scan)
+    assert np.array_equal(top, np.argsort(scan)[:PIVOT_KEEP])
+    assert np.all(np.isclose(rate[top], PIVOT_RATES[0]))
+    per = pivot_picks(scan, per_rate=True)
+    assert per.size == k and top[0] in per               # the cheapest of all is one of them
+    for r in range(k):                                   # the cheapest start of each rate
+        at = np.nonzero(np.arange(rate.size) % k == r)[0]
+        assert per[r] == at[np.argmin(scan[at])]
 
 
 def test_necker_mirror_reflects_the_rotation_in_the_plane_across_the_line_of_sight():

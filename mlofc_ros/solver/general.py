@@ -513,8 +513,8 @@ PIVOT_KEEP = 4
 def pivot_picks(scan: np.ndarray, per_rate: bool = False) -> np.ndarray:
     """Return the indices of the pivot starts to refine, given their scan costs ``(C,)``.
 
-    The :data:`PIVOT_KEEP` cheapest, and with ``per_rate`` the cheapest of each rate of
-    :data:`PIVOT_RATES` too. Before any LM step a fast start costs more than a slow one whose
+    The :data:`PIVOT_KEEP` cheapest, or with ``per_rate`` the cheapest of each rate of
+    :data:`PIVOT_RATES` (which holds the cheapest of all). Before any LM step a fast start costs more than a slow one whose
     translation explains the flow (the scan's T is only the pivot's), so the global ranking
     favours the slow starts, from which LM slides into a nearly static fit: on a box spinning
     at 138 deg/s (own2+bg, render seed 4, frame 12 of the rescan) 9 of the 384 starts reach
@@ -522,12 +522,10 @@ def pivot_picks(scan: np.ndarray, per_rate: bool = False) -> np.ndarray:
     all), but 1st among the starts at its rate.
     """
     scan = np.asarray(scan, dtype=float)
-    pick = np.argsort(scan)[:PIVOT_KEEP]
     if not per_rate:
-        return pick
+        return np.argsort(scan)[:PIVOT_KEEP]
     k = PIVOT_RATES.size
-    per = np.argmin(scan.reshape(-1, k), axis=0) * k + np.arange(k)
-    return np.concatenate([pick, per[~np.isin(per, pick)]])
+    return np.argmin(scan.reshape(-1, k), axis=0) * k + np.arange(k)
 
 
 def pivot_starts(ray: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
@@ -560,9 +558,9 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
     is not convex in the direction of T). Marginalised directions: the direction of ``t0``
     (else :data:`T_STARTS`) at every scale of :data:`T_SCALES`, ``t0`` itself and T = 0.
     With ``ray`` (unit, camera frame: towards the body's lines), also from the
-    :data:`PIVOT_KEEP` best of :func:`pivot_starts` (when ``pivots``; with ``per_rate`` also
-    the best of each rate, :func:`pivot_picks`), and the winner's :func:`necker_mirror` is
-    tried too. The cheapest run wins. ``robust`` (px^2): scans, fits
+    :data:`PIVOT_KEEP` best of :func:`pivot_starts` (when ``pivots``; with ``per_rate`` the
+    best of each rate instead, :func:`pivot_picks`), and the winner's :func:`necker_mirror`
+    is tried too. The cheapest run wins. ``robust`` (px^2): scans, fits
     and comparisons on the robust cost at that noise level (:func:`_lm_runs`).
     """
     rows, base = obs.rows[idx], obs.m_first[idx]
