@@ -77,11 +77,14 @@ GENERAL_ROBUST_POLISH = True
 #: one, 32% wrong, 13% with none).
 RESCAN_MARGIN_ROBUST = 0.0
 
-#: Whether the rescan also refines the best pivot start of every rate
-#: (:func:`.general.pivot_picks`): a body fitted as nearly static, its flow explained by a
-#: translation, ranks the starts at its true rate low before any LM step (session 23). The
-#: cold search keeps the global ranking: there per-rate picks took the 35 three-motion
-#: Hopkins155 sequences from 10.5 to 10.7% and moved the spinning boxes both ways.
+#: Whether the rescan refines the best pivot start of every rate instead of the best four
+#: overall (:func:`.general.pivot_picks`): a body fitted as nearly static, its flow explained
+#: by a translation, ranks the starts at its true rate low before any LM step (session 23).
+#: Spinning benchmark, window 10, render seeds 0-11, mean wrong % own2+bg / own3+bg / own2 /
+#: own3: 3.13 / 4.72 / 0.18 / 1.09 -> 2.08 / 4.29 / 0.21 / 0.50, boxes with omega within 5%
+#: 106 -> 108 of 120, ~+6-10% CPU per frame. The cold search keeps the global ranking: the
+#: best four plus the best of every rate there (and in the rescan) took the 35 three-motion
+#: Hopkins155 sequences from 10.5 to 10.7% (and own3+bg to 5.2%).
 RESCAN_PER_RATE = True
 
 #: Weight of each body's image-position term (:func:`.general.position_costs`, times the
