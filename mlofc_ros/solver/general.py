@@ -514,9 +514,10 @@ def pivot_picks(scan: np.ndarray, per_rate: bool = False) -> np.ndarray:
     """Return the indices of the pivot starts to refine, given their scan costs ``(C,)``.
 
     The :data:`PIVOT_KEEP` cheapest, or with ``per_rate`` the cheapest of each rate of
-    :data:`PIVOT_RATES` (which holds the cheapest of all). Before any LM step a fast start costs more than a slow one whose
-    translation explains the flow (the scan's T is only the pivot's), so the global ranking
-    favours the slow starts, from which LM slides into a nearly static fit: on a box spinning
+    :data:`PIVOT_RATES` (which holds the cheapest of all). Before any LM step a fast start
+    costs more than a slow one whose translation explains the flow (the scan's T is only the
+    pivot's), so the global ranking favours the slow starts, from which LM slides into a
+    nearly static fit: on a box spinning
     at 138 deg/s (own2+bg, render seed 4, frame 12 of the rescan) 9 of the 384 starts reach
     its motion, the first of them ranked 117th by the scan (41st after 3 LM iterations from
     all), but 1st among the starts at its rate.
