@@ -517,10 +517,9 @@ def pivot_picks(scan: np.ndarray, per_rate: bool = False) -> np.ndarray:
     :data:`PIVOT_RATES` (which holds the cheapest of all). Before any LM step a fast start
     costs more than a slow one whose translation explains the flow (the scan's T is only the
     pivot's), so the global ranking favours the slow starts, from which LM slides into a
-    nearly static fit: on a box spinning
-    at 138 deg/s (own2+bg, render seed 4, frame 12 of the rescan) 9 of the 384 starts reach
-    its motion, the first of them ranked 117th by the scan (41st after 3 LM iterations from
-    all), but 1st among the starts at its rate.
+    nearly static fit: on a box spinning at 138 deg/s (own2+bg, render seed 4, frame 12 of
+    the rescan) 9 of the 384 starts reach its motion, the first of them ranked 117th by the
+    scan (41st after 3 LM iterations from all), but 1st among the starts at its rate.
     """
     scan = np.asarray(scan, dtype=float)
     if not per_rate:
@@ -561,8 +560,8 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
     With ``ray`` (unit, camera frame: towards the body's lines), also from the
     :data:`PIVOT_KEEP` best of :func:`pivot_starts` (when ``pivots``; with ``per_rate`` the
     best of each rate instead, :func:`pivot_picks`), and the winner's :func:`necker_mirror`
-    is tried too. The cheapest run wins. ``robust`` (px^2): scans, fits
-    and comparisons on the robust cost at that noise level (:func:`_lm_runs`).
+    is tried too. The cheapest run wins. ``robust`` (px^2): scans, fits and comparisons on
+    the robust cost at that noise level (:func:`_lm_runs`).
     """
     rows, base = obs.rows[idx], obs.m_first[idx]
     scale = None if robust is None else robust_scale(obs.frames[idx], robust)
