@@ -375,3 +375,50 @@ def test_a_body_fitted_worse_than_the_measured_noise_gets_a_wider_covariance(mon
     assert trace(4 * noise ** 2) / at_noise > 2.0                # overestimated: not shrunk
     monkeypatch.setattr(general, 'COVARIANCE_FIT_SCALE', False)
     assert trace(noise ** 2 / 9) / at_noise < 0.3
+
+
+def test_closed_form_smallest_eigenpair_matches_lapack_also_when_eigenvalues_meet():
+    from mlofc_ros.solver.general import _smallest_eigenpair
+    rng = np.random.default_rng(3)
+    spectra = [[1e6, 1e3, 1e-3], [1e8, 1e7, 1e-6], [1e6, 1e6, 3.0], [1e6, 1.0, 1.0 + 1e-9],
+               [1e6, 0.0, 0.0], [5.0, 5.0, 5.0], [0.0, 0.0, 0.0]]
+    for d in spectra:
+        Q, _ = np.linalg.qr(rng.normal(size=(200, 3, 3)))
+        A = Q @ np.diag(d) @ np.swapaxes(Q, 1, 2)
+        A = 0.5 * (A + np.swapaxes(A, 1, 2))
+        lam, v = _smallest_eigenpair(A)
+        val = np.linalg.eigh(A)[0][:, 0]
+        top = max(d[0], 1e-300)
+        assert np.all(np.abs(lam - val) <= 1e-14 * top)
+        assert np.allclose(np.linalg.norm(v, axis=1), 1.0)
+        # an eigenvector: of the smallest eigenvalue, or of its (nearly) degenerate eigenspace
+        res = np.linalg.norm(np.einsum('nij,nj->ni', A, v) - lam[:, None] * v, axis=1)
+        assert np.all(res <= 1e-7 * top)
+
+
+def test_marginal_costs_and_residual_vectors_match_the_direct_formula():
+    # the Woodbury form and the closed-form 2x2 square root against the marginal cost
+    # r^T (I + M M^T / s2)^-1 r + s2 log det(I + M^T M / s2), minimised over the unit moment
+    a, w_a, t_a = spinning_lines(n_lines=12, seed=2)
+    obs = LineObservations(a, (F, F, C, C))
+    idx = np.arange(12)
+    sigma2, t = 2.0, t_a * 0.05
+    from mlofc_ros.solver.general import _design, _direction_columns
+    _, n0 = marginal_residuals(obs, idx, w_a * 1.1, t, sigma2)
+    An, Av = _design(obs.rows[idx], w_a * 1.1, t)
+    M = _direction_columns(Av, obs.m_first[idx]) / np.sqrt(sigma2)
+    eye = np.eye(M.shape[1])
+    Sigma_inv = np.linalg.inv(eye + M @ np.swapaxes(M, 1, 2))
+    C_direct = np.swapaxes(An, 1, 2) @ Sigma_inv @ An
+    val, vec = np.linalg.eigh(C_direct)
+    logdet = sigma2 * np.linalg.slogdet(np.eye(2) + np.swapaxes(M, 1, 2) @ M)[1]
+    # the first pass uses the first observed normals' plane, as this direct computation
+    first, n_first = marginal_residuals(obs, idx, w_a * 1.1, t, sigma2, obs.m_first[idx])
+    assert np.allclose(first, val[:, 0] + logdet, rtol=1e-9)
+    assert np.allclose(np.abs(np.sum(n_first * vec[:, :, 0], axis=1)), 1.0, atol=1e-9)
+    # residual vectors at fixed moments (the v0 plane of the same base): their squares sum to
+    # the cost there
+    cost2, n2 = marginal_residuals(obs, idx, w_a * 1.1, t, sigma2, n0)
+    vecs = marginal_residuals(obs, idx, w_a * 1.1, t, sigma2, n0, fixed=n2)[0]
+    assert vecs.shape == (12, 2 * a.shape[1] + 1)
+    assert np.allclose(np.sum(vecs ** 2, axis=1), cost2, rtol=1e-9)
