@@ -291,7 +291,8 @@ def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: float,
     G = [[(b[c][0] * vn[0][j] + b[c][1] * vn[1][j] + b[c][2] * vn[2][j]) * root
           for j in range(3)] for c in range(2)]
     s00, s01, s11 = 1.0 + S[0][0], 0.5 * (S[0][1] + S[1][0]), 1.0 + S[1][1]
-    det = s00 * s11 - s01 * s01                                     # det(I + S) >= 1
+    # det(I + S) >= 1 (rounding could take it below, then its log's root would be NaN)
+    det = np.maximum(s00 * s11 - s01 * s01, 1.0)
     logdet = sigma2 * np.log(det)
     if logdet_out is not None:
         logdet_out.append(logdet)
@@ -322,7 +323,7 @@ def _marginal_vectors(An: np.ndarray, M: np.ndarray, fixed: np.ndarray, sigma2: 
     M = M / np.sqrt(sigma2)
     m0, m1 = M[..., 0], M[..., 1]
     a, b, c = np.sum(m0 * m0, axis=-1), np.sum(m0 * m1, axis=-1), np.sum(m1 * m1, axis=-1)
-    logdet = sigma2 * np.log((1.0 + a) * (1.0 + c) - b * b)
+    logdet = sigma2 * np.log(np.maximum((1.0 + a) * (1.0 + c) - b * b, 1.0))   # det(I + S)
     if logdet_out is not None:
         logdet_out.append(logdet)
     half, mid = 0.5 * (a - c), 0.5 * (a + c)
