@@ -43,7 +43,7 @@ drops the stalest frame), so the executor is never blocked by the work and any e
 decodes every queued image, tracks its lines and adds them to the window
 (:meth:`Pipeline.observe`). A fast solve (the last one under :data:`INLINE_SOLVE_S`) follows in
 the same thread (:meth:`Pipeline.solve`, then publishing). A slow one (method ``general``:
-0.3-3 s per window) goes to a solver worker, which segments the newest window it has not
+1-3 s per window) goes to a solver worker, which segments the newest window it has not
 solved yet while the tracking worker goes on: the tracker still sees every frame, so its
 tracks survive; the frames tracked while the solver was busy are not published (counted as
 dropped, ``unsolved`` in ``stats``) except the newest, which it solves next.
