@@ -215,7 +215,15 @@ def _smallest(P: np.ndarray, base: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
 
     ``P (..., L, R, 3)``; the eigenvector's sign follows ``base (..., L, 3)``.
     """
-    val, n0 = _smallest_eigenpair(np.swapaxes(P, -1, -2) @ P)
+    return _toward(*_smallest_eigenpair(np.swapaxes(P, -1, -2) @ P), base)
+
+
+def _toward(val: np.ndarray, n0: np.ndarray, base: np.ndarray
+            ) -> Tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues ``(...)`` clipped at 0, unit eigenvectors ``n0 (..., 3)`` signed like ``base``.
+
+    ``n0`` is flipped in place where it points away from ``base``.
+    """
     n0 *= np.where(np.sum(n0 * base, axis=-1) < 0, -1.0, 1.0)[..., None]
     return np.maximum(val, 0.0), n0
 
@@ -303,8 +311,8 @@ def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: float,
     C = {(i, j): nn[i][j] - G[0][i] * X[0][j] - G[1][i] * X[1][j]
          for i in range(3) for j in range(i, 3)}
     val, n0 = _smallest_eigenpair_parts(C[0, 0], C[0, 1], C[0, 2], C[1, 1], C[1, 2], C[2, 2])
-    n0 *= np.where(np.sum(n0 * base, axis=-1) < 0, -1.0, 1.0)[..., None]
-    return np.maximum(val, 0.0) + logdet, n0
+    val, n0 = _toward(val, n0, base)
+    return val + logdet, n0
 
 
 def _marginal_vectors(An: np.ndarray, M: np.ndarray, fixed: np.ndarray, sigma2: float,
