@@ -539,8 +539,8 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
     n_par = 6 if free else 5
     # parameter offsets of the Jacobian (+-h per parameter) and the residual itself (row 0).
     # Forward differences would halve the probes (a warm frame ~15% faster), but on the
-    # spinning benchmark they left two boxes in wrong basins that central ones do not
-    # (own2+bg render seeds 3 and 6, session 24)
+    # spinning benchmark they moved three runs into wrong basins that central ones avoid
+    # (own2+bg render seeds 3 and 6, own3+bg seed 2; session 24)
     probe = np.zeros((1 + 2 * n_par, n_par))
     probe[1::2, :][np.arange(n_par), np.arange(n_par)] = h
     probe[2::2, :][np.arange(n_par), np.arange(n_par)] = -h
