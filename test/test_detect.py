@@ -281,6 +281,28 @@ def test_bridge_reuses_its_buffers_with_the_same_result():
         assert scratch['gx'].shape == img.shape
 
 
+def test_bridge_sort_key_orders_each_hough_line_like_lexsort():
+    # bridge_crossings sorts the pixels of every candidate line by one combined key
+    # (line * span + position along it), unstable: right only if no two pixels of a line share
+    # a position. The bins' normal angles ((i + 0.5) x 3 deg) have irrational slopes, so over a
+    # whole 640x480 image the positions of distinct pixels differ by far more than the key's
+    # rounding (< 1e-9 px for thousands of lines x span), and the order is lexsort's
+    from mlofc_ros.segments.detect import _HOUGH_BINS
+    centre = (np.arange(_HOUGH_BINS) + 0.5) * (np.pi / _HOUGH_BINS)
+    ys, xs = np.mgrid[0:480, 0:640]
+    xs, ys = xs.ravel().astype(np.float64), ys.ravel().astype(np.float64)
+    gaps = [np.diff(np.sort(ys * np.cos(a) - xs * np.sin(a))).min() for a in centre]
+    assert min(gaps) > 1e-5
+    rng = np.random.default_rng(0)
+    pick = rng.integers(0, xs.size, 20000)
+    c = rng.integers(0, _HOUGH_BINS, pick.size)
+    keep = np.unique(np.stack([c, pick]), axis=1)          # a pixel at most once per line
+    c, px, py = keep[0], xs[keep[1]], ys[keep[1]]
+    t = py * np.cos(centre[c]) - px * np.sin(centre[c])
+    span = 4.0 * (int(np.ceil(np.hypot(480, 640))) + 2)
+    np.testing.assert_array_equal(np.argsort(c * span + t), np.lexsort((t, c)))
+
+
 def test_rows_not_in_matches_the_dense_comparison():
     # rows equal within the tolerance per coordinate, found by a sorted search on the first
     # coordinate: the same answer as comparing every row with every row

@@ -378,7 +378,11 @@ def bridge_crossings(gray: np.ndarray, segments: np.ndarray, min_length: float =
     if c.size == 0:
         return empty
     t = py * nx[c] - px * ny[c]                                  # position along the line
-    o = np.lexsort((t, c))
+    # by line, then along it: one sort of a combined key (|t| < rmax, so lines do not mix),
+    # the order of lexsort((t, c)) at a fraction of its cost; no two pixels of one line share
+    # a t (the bins' angles have irrational slopes), so the unstable sort has no ties to break
+    span = 4.0 * rmax
+    o = np.argsort(c * span + t)
     c, px, py, pw, t = c[o], px[o], py[o], pw[o], t[o]
     same = c[1:] == c[:-1]
     gap = t[1:] - t[:-1]
@@ -387,7 +391,11 @@ def bridge_crossings(gray: np.ndarray, segments: np.ndarray, min_length: float =
     if gi.size:
         # where segments cross the candidate lines (or end within 2 px of them), as
         # positions along each line, sorted per line; a gap is bridged when one lies in it
-        cj, sj = np.divmod(np.arange(n_c * seg.shape[0]), seg.shape[0])
+        # only the lines with such a gap: the others ask for no crossing
+        lines = c[gi]                                            # sorted: c is
+        lines = lines[np.append(True, lines[1:] != lines[:-1])]
+        cj, sj = np.divmod(np.arange(lines.size * seg.shape[0]), seg.shape[0])
+        cj = lines[cj]
         da = seg[sj, 0] * nx[cj] + seg[sj, 1] * ny[cj] - rho[cj]
         db = seg[sj, 2] * nx[cj] + seg[sj, 3] * ny[cj] - rho[cj]
         length = np.maximum(np.hypot(d[sj, 0], d[sj, 1]), 1e-9)
@@ -396,7 +404,6 @@ def bridge_crossings(gray: np.ndarray, segments: np.ndarray, min_length: float =
                & (f >= -2.0 / length) & (f <= 1.0 + 2.0 / length))
         cj, sj, f = cj[hit], sj[hit], f[hit]
         tx = ((seg[sj, 1] + f * d[sj, 1]) * nx[cj] - (seg[sj, 0] + f * d[sj, 0]) * ny[cj])
-        span = 4.0 * rmax
         key = np.sort(cj * span + tx)
         lo = np.searchsorted(key, c[gi] * span + t[gi] - 1.0, 'left')
         hi = np.searchsorted(key, c[gi] * span + t[gi + 1] + 1.0, 'right')
