@@ -16,6 +16,7 @@ import os
 import pathlib
 import tempfile
 
+import numpy as np
 import pytest
 
 from mlofc_ros.bench import pipeline, soak
@@ -26,9 +27,20 @@ def test_pipeline_quick_writes_report(tmp_path: pathlib.Path) -> None:
     text = (tmp_path / 'pipeline.md').read_text()
     assert 'python -m mlofc_ros.bench pipeline --quick' in text
     assert '## Stages (median / p95 ms per frame)' in text
+    assert '## Where the mean goes: frames with and without detection' in text
     assert 'rendered 320x240' in text and 'process / LSD' in text
     png = tmp_path / 'pipeline.png'
     assert png.is_file() and png.stat().st_size > 1000
+
+
+def test_split_row_counts_both_kinds_of_frame() -> None:
+    # two detection frames of 20 ms and three others of 4 ms, LSD 10 ms: the detection frames
+    # are 2x LSD and 40 / 52 of the time
+    r = {'detected': np.array([1.0, 0, 0, 1, 0]), 'total': np.array([20.0, 4, 4, 20, 4]),
+         'lsd': np.full(5, 10.0)}
+    det_n, det_ms, det_x, det_share, n, ms, x, share = pipeline._split_row(r)
+    assert (det_n, n) == (2, 3) and (det_ms, ms) == (20.0, 4.0) and (det_x, x) == (2.0, 0.4)
+    assert abs(det_share - 40 / 52) < 1e-12 and abs(share - 12 / 52) < 1e-12
 
 
 def test_pipeline_takes_node_parameters(tmp_path: pathlib.Path) -> None:

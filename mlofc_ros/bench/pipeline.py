@@ -196,6 +196,18 @@ def _p95(v: np.ndarray) -> float:
     return float(np.percentile(v, 95)) if len(v) else math.nan
 
 
+def _split_row(r: Dict[str, np.ndarray]) -> List[object]:
+    """Detection frames and the others: count, median ms, x median LSD, share of the time."""
+    det = r['detected'] > 0
+    total, lsd = float(np.sum(r['total'])), _med(r['lsd'])
+    out: List[object] = []
+    for m in (det, ~det):
+        t = r['total'][m]
+        out += [int(m.sum()), _med(t), _med(t) / lsd if len(t) else math.nan,
+                float(np.sum(t)) / total if total > 0 else math.nan]
+    return out
+
+
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench pipeline',
                                  description='Per-stage pipeline timings vs LSD alone.')
@@ -277,9 +289,10 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
          'Load average (1 min) at start / end': f'{args.load:.1f} / {os.getloadavg()[0]:.1f}'})
     names = [s.name for s in seqs]
     lines = [head]
-    rows, stage_rows = [], []
+    rows, stage_rows, split_rows = [], [], []
     for s in seqs:
         r = {k: _steady(v, skip) for k, v in res[s.name].items()}
+        split_rows.append([s.name] + _split_row(r))
         ratio = _med(r['total']) / _med(r['lsd'])
         h, w = s.frames[0].shape
         cam = 'given' if s.camera is not None else 'none (f estimated)'
@@ -331,6 +344,15 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
               'columns are the same calls timed with `time.thread_time` (the machine is shared: '
               'wall time includes waiting for a core). Solve share = median solve / median '
               'process.', '',
+              '## Where the mean goes: frames with and without detection', '',
+              common.markdown_table(
+                  ['sequence', 'detection frames', 'median ms', 'x LSD (median)',
+                   'share of process time', 'other frames', 'median ms', 'x LSD (median)',
+                   'share of process time'], split_rows),
+              'A frame runs the detector when the tracker asks for it (detection on demand: '
+              'every `detect_every`-th frame while new edges appear, up to every '
+              '`detect_every_max`-th in a quiet scene). x LSD: the median '
+              '`Pipeline.process` over the median LSD of all frames.', '',
               '## Stages (median / p95 ms per frame)', '',
               common.markdown_table(
                   ['sequence', 'decode mono8', 'decode bgr8', 'detect/track', 'undistort',
