@@ -197,7 +197,7 @@ def _p95(v: np.ndarray) -> float:
 
 
 def _split_row(r: Dict[str, np.ndarray]) -> List[object]:
-    """Detection frames and the others: count, median ms, x median LSD, share of the time."""
+    """Return count, median ms, x median LSD and share of the time of detection frames, others."""
     det = r['detected'] > 0
     total, lsd = float(np.sum(r['total'])), _med(r['lsd'])
     out: List[object] = []
