@@ -203,8 +203,8 @@ def _split_row(r: Dict[str, np.ndarray]) -> List[object]:
     out: List[object] = []
     for m in (det, ~det):
         t = r['total'][m]
-        out += [int(m.sum()), _med(t), _med(t) / lsd if len(t) else math.nan,
-                float(np.sum(t)) / total if total > 0 else math.nan]
+        med = _med(t)                            # NaN for no frames, and so is its ratio
+        out += [int(m.sum()), med, med / lsd, float(np.sum(t)) / total if total > 0 else math.nan]
     return out
 
 

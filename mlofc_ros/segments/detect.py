@@ -392,7 +392,7 @@ def bridge_crossings(gray: np.ndarray, segments: np.ndarray, min_length: float =
         # where segments cross the candidate lines (or end within 2 px of them), as
         # positions along each line, sorted per line; a gap is bridged when one lies in it
         # only the lines with such a gap: the others ask for no crossing
-        lines = c[gi]                                            # sorted: c is
+        lines = c[gi]                              # c is sorted: the first of each run
         lines = lines[np.append(True, lines[1:] != lines[:-1])]
         cj, sj = np.divmod(np.arange(lines.size * seg.shape[0]), seg.shape[0])
         cj = lines[cj]
