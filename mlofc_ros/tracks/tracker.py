@@ -142,8 +142,8 @@ def _normal_search(image: np.ndarray, pts: np.ndarray, nrm: np.ndarray, radius: 
     # offset-major layout (O, N): the per-sample reductions below then run across rows
     # (long inner loops instead of one short row per sample), and remap gets O long rows
     # (about half the time of N rows of O pixels); the products offset x normal are per line
-    m = (pts.reshape(2, 1, n)
-         + np.repeat(offs[:, None] * nrm[:, None, :], s_n, axis=2)).astype(np.float32)
+    m = (pts.reshape(2, 1, t_n, s_n)
+         + (offs[:, None] * nrm[:, None, :])[..., None]).astype(np.float32).reshape(2, o_n, n)
     mx, my = m                                                                  # (O, N)
     val = np.empty((o_n, n), np.float32)
     for c in range(0, n, _REMAP_COLS):       # remap takes < SHRT_MAX columns
