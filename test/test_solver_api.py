@@ -106,16 +106,6 @@ def test_seed_makes_results_repeat():
     np.testing.assert_array_equal(a.labels, b.labels)
 
 
-def test_lazy_generator_draws_what_default_rng_draws():
-    from mlofc_ros.solver.core import _LazyGenerator
-    lazy, ref = _LazyGenerator(5), np.random.default_rng(5)
-    assert lazy._rng is None            # nothing made until a number is drawn
-    np.testing.assert_array_equal(lazy.integers(0, 9, 20), ref.integers(0, 9, 20))
-    np.testing.assert_array_equal(lazy.choice(30, 4, replace=False),
-                                  ref.choice(30, 4, replace=False))
-    np.testing.assert_array_equal(lazy.normal(size=3), ref.normal(size=3))
-
-
 GOOD = random_scene(2, 10, seed=9)
 
 

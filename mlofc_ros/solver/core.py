@@ -266,25 +266,6 @@ def _argmin_nan_to_num(costs: np.ndarray) -> np.ndarray:
 _BIG = float(np.finfo(np.float64).max)
 
 
-class _LazyGenerator:
-    """``np.random.default_rng(seed)``, made on first use.
-
-    A warm solve that the previous window's labels settle draws no random number, and making
-    the generator costs about as much as a tenth of such a solve.
-    """
-
-    __slots__ = ('_seed', '_rng')
-
-    def __init__(self, seed: Optional[int]) -> None:
-        self._seed = seed
-        self._rng: Optional[np.random.Generator] = None
-
-    def __getattr__(self, name: str):
-        if self._rng is None:
-            self._rng = np.random.default_rng(self._seed)
-        return getattr(self._rng, name)
-
-
 def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] = None,
                   image_size: Optional[Sequence[float]] = None, method: str = 'robust', *,
                   seed: int = 0, init_labels: Optional[np.ndarray] = None,
@@ -388,7 +369,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         # ids of bodies this model does not have are unknown
         init_labels = np.where((init_labels >= 0) & (init_labels < n), init_labels, -1)
         init_labels = init_labels.astype(np.int64)
-    rng = _LazyGenerator(seed)
+    rng = np.random.default_rng(seed)
     if method == 'general':
         # the rotation-only step as before session 17 (no lowered bar, no competing warm
         # start): bench live's own3+bg at 10 Hz, whose runs swing by 5-10 points, was 12.6-14.7%
