@@ -84,6 +84,17 @@ def test_ros_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert (tmp_path / 'ros.png').is_file()
 
 
+def test_ros_process_times_are_read_back_by_frame_range(tmp_path: pathlib.Path) -> None:
+    from mlofc_ros.bench import ros
+    stats = tmp_path / 'node_stats.json'
+    wall, cpu = ros.read_proc_times(stats, 0, 5)          # nothing written yet
+    assert wall.shape == cpu.shape == (0,)
+    pathlib.Path(ros.proc_times_path(stats)).write_text('1.5 1.25\n2.0 nan\n3.0 2.5\n')
+    wall, cpu = ros.read_proc_times(stats, 1, 3)
+    np.testing.assert_array_equal(wall, [2.0, 3.0])
+    assert np.isnan(cpu[0]) and cpu[1] == 2.5
+
+
 def test_live_quick_writes_report(tmp_path: pathlib.Path) -> None:
     pytest.importorskip('rclpy')
     from mlofc_ros.bench import live
