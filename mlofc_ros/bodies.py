@@ -223,9 +223,7 @@ class BodyTracker:
             votes = self._track_votes[pos[hit], :slots].astype(float)
             total = votes.sum(axis=1, keepdims=True)
             share = votes / np.maximum(total, 1.0)
-            # np.add.at(overlap, lab[hit], share) as one bincount (same sums, same order)
-            cell = (lab[hit] * slots)[:, None] + np.arange(slots)
-            overlap = np.bincount(cell.ravel(), share.ravel(), n * slots).reshape(n, slots)
+            np.add.at(overlap, lab[hit], share)
         overlap /= np.maximum(overlap.sum(axis=1, keepdims=True), 1.0)
         sim = np.zeros((n, slots))
         if self._omegas:

@@ -34,7 +34,6 @@ import statistics
 import time
 from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Set, Tuple
 
-import cv2
 import numpy as np
 
 from mlofc_ros import params as _params
@@ -518,8 +517,7 @@ class Pipeline:
 
         timings: Dict[str, float] = {}
         t = time.perf_counter()
-        lo, hi, _, _ = cv2.minMaxLoc(gray)      # one pass over the image, not two
-        blank = hi - lo <= BLANK_CONTRAST
+        blank = int(gray.max()) - int(gray.min()) <= BLANK_CONTRAST
         if blank:
             # nothing to see (lens cap, dropped frame): the frame enters the window empty and
             # the tracker carries its tracks from the last frame with content to the next
