@@ -531,8 +531,9 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
         rms = np.where(dof > 0, np.sqrt(best / dof), np.nan)
         directions = np.where(scale[:, None] > 0, sol['T'] / scale[:, None], 0.0)
     info = dict(rot.info, sigma_px=float(np.sqrt(sigma2)), start=sol['start'],
-                translation_directions=directions, translation_scales=scale,
-                segmentation_angular_velocities=sol['W'], image_size=size)
+                score=float(sol['score']), translation_directions=directions,
+                translation_scales=scale, segmentation_angular_velocities=sol['W'],
+                image_size=size)
     return SegmentationResult(labels=labels, angular_velocities=W_pub,
                               angular_covariances=cov, focal_length=f, residuals=rms,
                               costs=sol['costs'], method='general', info=info)
