@@ -20,6 +20,7 @@ BENCHMARKS = {
     'paper': 'the paper experiments (Fig. 2-5): misclassification and motion error vs noise',
     'frontend': 'line detection and tracking on rendered and real sequences',
     'hopkins': 'real line tracks built from Hopkins155 point tracks',
+    'hopkins_stream': "Hopkins155 line tracks streamed through general's warm path (the node's)",
     'accuracy': 'robust solver vs floor, outliers, multi-frame, model selection, solver speed',
     'covariance': 'NEES of the published angular-velocity covariance on rendered scenes',
     'pipeline': 'per-stage timings of the whole per-frame pipeline vs LSD alone',

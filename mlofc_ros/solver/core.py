@@ -108,6 +108,26 @@ WARM_POSITION_WEIGHT = 1.0
 #: 0.3 / 2.9.
 WARM_KEEP_MOTIONS = True
 
+#: Whether the warm path starts the marginalised segmentation from the previous window's
+#: labels of the tracks that had one (new and unassigned tracks take the assignment at the
+#: previous motions), instead of from that assignment for every track. The assignment uses
+#: the fitted-direction costs (:func:`.general_warm`), which at short windows carry little
+#: first-order information (two unknowns per line; 2K - 4 constraints): on Hopkins155
+#: streamed through the warm path (`bench hopkins_stream`, K = 5) right groupings fell apart
+#: in the next windows (1R2TCR 0 -> 33% wrong: two bodies' lines swapped). The 35 three-motion
+#: sequences, mean over every window: 23.3 -> 10.7% (session 28).
+WARM_KEEP_LABELS = True
+
+#: With :data:`WARM_KEEP_LABELS`, also run the old start (every track reassigned) and keep
+#: the lower score of the two: one more marginalised segmentation per warm solve (+12-25% CPU
+#: per frame). The reassignment repairs groupings that the kept labels would carry on (a
+#: wrong first cold search). Spinning benchmark, window 10, mean wrong % own2+bg / own3+bg /
+#: own2 / own3, render seeds 0-5: reassigned only (before) 5.9 / 6.7 / 0.4 / 3.9, kept only
+#: 3.4 / 8.0 / 0.1 / 5.6, both 1.8 / 5.3 / 0.4 / 2.1; seeds 0-11, before -> both: 3.6 / 5.3
+#: / 0.2 / 2.0 -> 1.6 / 3.9 / 0.2 / 1.2, boxes with omega within 5% 106 -> 112 of 120.
+#: Hopkins streamed: 10.6% (session 28).
+WARM_ALSO_REASSIGNED = True
+
 #: Random restarts of the paper's K-means from a random labelling (the best is kept).
 KMEANS_RESTARTS = 10
 
@@ -439,7 +459,10 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
 
     Starts from the rotation-only solution ``rot`` (which also supplies the focal length when
     it was unknown) and a spatial clustering; needs three frames, else returns ``rot``. With
-    the previous window's labels and motions, first tracks them (:func:`.general_warm`);
+    the previous window's labels and motions, first tracks them (:func:`.general_warm`): the
+    marginalised segmentation starts from the previous labels where tracks had one
+    (:data:`WARM_KEEP_LABELS`) and from every track assigned at the previous motions
+    (:data:`WARM_ALSO_REASSIGNED`), the lower score kept;
     the tracked bodies marked in ``rescan (n,)`` bool are refitted from the pivot starts too
     (:func:`.fit_body_multistart` at the measured noise), kept when cheaper by
     :data:`RESCAN_MARGIN` (:data:`RESCAN_MARGIN_ROBUST` on the robust cost). The final refit
@@ -475,7 +498,12 @@ def _general(arr: np.ndarray, rot: SegmentationResult, rng: np.random.Generator,
                 # the warm fits (fitted directions) give the noise level and the starts; each
                 # body is also a blob in the image, as in the cold search (compact bodies keep
                 # their lines when the motion costs alone would let a neighbour take them)
-                sol = marginal_segmentation(obs, n, [('warm', warm['labels'])], warm['W'],
+                starts = [('warm', warm['labels'])]
+                if WARM_KEEP_LABELS:
+                    prev = np.asarray(init_labels)
+                    kept = ('warm', np.where(prev >= 0, prev, warm['labels']))
+                    starts = [kept, starts[0]] if WARM_ALSO_REASSIGNED else [kept]
+                sol = marginal_segmentation(obs, n, starts, warm['W'],
                                             warm['T'], NOISE_FACTOR * warm['sigma2'],
                                             rounds=2, iterations=4, neighbours=neighbours,
                                             keep=1, first_iterations=4, pivots=False,

@@ -1,0 +1,239 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Hopkins155 line tracks streamed through `general`'s warm path, as the node solves them.
+
+``python -m mlofc_ros.bench hopkins_stream [--motions 3] [--sequences ...] [--variants ...]
+[--out DIR]`` writes ``hopkins_stream.md`` to ``docs/results/`` (or ``--out``) and prints it
+(the 35 three-motion sequences by default, ~22 min on 2 cores).
+
+`bench hopkins` solves each K-frame window cold. A node sees the sequence as a stream: one
+window per frame, each warm-started from the previous window's labels and motions. Here the
+line tracks are built once, in the sequence's first frame
+(:func:`mlofc_ros.datasets.hopkins.line_tracks` with all frames, the same pairing rules as
+`bench hopkins`), and a window of K = 5 frames slides by one frame over the whole sequence,
+solved as :meth:`mlofc_ros.pipeline.Pipeline.solve` does: the first window cold, every later
+one with ``init_labels`` / ``init_motions`` from the one before and every body rescanned
+(``pipeline.RESCAN_EVERY_BODY``); focal length unknown, estimated per window until
+``pipeline.FOCAL_SAMPLES`` estimates, then fixed at their median. Body ids are the solver's
+own (the lines are the same in every window, so no id bookkeeping is needed), and every body
+hands its motion on, also one the pipeline would not publish (fewer than
+``pipeline.MIN_BODY_TRACKS`` lines, no covariance), whose motion the pipeline forgets.
+
+Variants (``--variants``) set :data:`mlofc_ros.solver.core.WARM_KEEP_LABELS` and
+``WARM_ALSO_REASSIGNED``: ``kept`` (tracks keep their previous label as the start of the warm
+segmentation), ``reassigned`` (before session 28: every track reassigned by the
+fitted-direction costs at the previous motions) and ``both`` (the two starts, the lower
+score kept). Reference on the same lines: the cold search (as `bench
+hopkins`, f unknown) at the middle and the last window.
+"""
+import argparse
+import os
+import time
+from typing import Dict, List, Optional, Sequence
+import zlib
+
+import numpy as np
+
+from mlofc_ros.bench import common
+from mlofc_ros.datasets import hopkins as hk
+
+#: Frames per window (`bench hopkins`'s K = 5).
+K = 5
+#: Variant -> (core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED).
+VARIANT_SETTINGS = {'kept': (True, False), 'both': (True, True), 'reassigned': (False, False)}
+VARIANTS = tuple(VARIANT_SETTINGS)
+LINES_PER_MOTION, MIN_LENGTH_PX, MAX_USES = 30, 40.0, 2
+QUICK_SEQUENCE = 'three-cars'
+
+
+def stream_sequence(path: str, variant: str, seed: int = 155, windows: Optional[int] = None,
+                    cold: bool = True) -> Dict[str, object]:
+    """Stream one sequence through the warm path; per-window misclassification (worker).
+
+    ``windows``: stop after this many (default: to the end of the sequence); ``cold=False``
+    skips the cold reference solves.
+
+    Returns a record: ``name``, ``n``, ``frames``, ``lines``, ``variant``, ``stream`` (the
+    misclassification of every window, first to last), ``cold_mid`` / ``cold_last`` (the
+    cold search at the middle / last window), ``cpu_warm`` (median CPU s per warm solve).
+    """
+    from mlofc_ros.solver import core
+
+    saved = core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED
+    core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED = VARIANT_SETTINGS[variant]
+    try:                                 # in-process runs (--jobs 1) get the defaults back
+        return _stream(path, variant, seed, windows, cold)
+    finally:
+        core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED = saved
+
+
+def _stream(path: str, variant: str, seed: int, windows: Optional[int], cold: bool
+            ) -> Dict[str, object]:
+    from mlofc_ros import pipeline
+    from mlofc_ros.solver import segment_lines
+
+    seq = hk.load_sequence(path)
+    n = seq.n_motions
+    s = int(np.random.SeedSequence([seed, zlib.crc32(seq.name.encode())])
+            .generate_state(1)[0] % (2 ** 31))
+    tracks, truth = hk.line_tracks(seq, LINES_PER_MOTION, None, MIN_LENGTH_PX, seed=s,
+                                   max_uses=MAX_USES)
+    frames = tracks.shape[1]
+    w, h = seq.image_size
+    labels, motions, focals, fixed = None, None, [], None
+    stream, cpu = [], []
+    ends = range(K, frames + 1) if windows is None else range(K, min(frames, K + windows - 1) + 1)
+    for t in ends:                                       # windows, not lines
+        intr = None if fixed is None else (fixed, fixed, w / 2.0, h / 2.0)
+        warm = {} if labels is None else {
+            'init_labels': labels, 'init_motions': motions, 'warm_competes': False,
+            'rescan': list(range(n)) if pipeline.RESCAN_EVERY_BODY else None}
+        c = time.process_time()
+        res = segment_lines(tracks[:, t - K:t], n, intrinsics=intr, image_size=seq.image_size,
+                            method='general', seed=s, **warm)
+        if labels is not None:
+            cpu.append(time.process_time() - c)
+        if fixed is None and np.isfinite(res.focal_length):
+            focals.append(float(res.focal_length))
+            if len(focals) >= pipeline.FOCAL_SAMPLES:
+                fixed = float(np.median(focals))
+        labels = np.asarray(res.labels)
+        motions = (np.asarray(res.info['segmentation_angular_velocities'], float),
+                   np.asarray(res.info['translation_directions'], float))
+        stream.append(common.misclassification(labels, truth, n))
+    rec = {'name': seq.name, 'group': seq.group, 'n': n, 'frames': frames,
+           'lines': int(len(truth)), 'variant': variant, 'stream': stream,
+           'cpu_warm': float(np.median(cpu)) if cpu else float('nan')}
+    last = frames - K
+    for key, start in (('cold_mid', last // 2), ('cold_last', last)) if cold else ():
+        res = segment_lines(tracks[:, start:start + K], n, intrinsics=None,
+                            image_size=seq.image_size, method='general', seed=s)
+        rec[key] = common.misclassification(res.labels, truth, n)
+    return rec
+
+
+def _unit(item) -> Dict[str, object]:
+    return stream_sequence(*item)
+
+
+def summary_table(records: Sequence[Dict[str, object]]) -> str:
+    """Markdown: mean (median) misclassification % per motions and variant."""
+    lines = ['| motions | sequences | variant | every window | middle window | last window '
+             '| cold search, middle | cold search, last | CPU s per warm solve (median) |',
+             '|--:|--:|:--|--:|--:|--:|--:|--:|--:|']
+
+    def cell(v: List[float]) -> str:
+        return f'{100 * np.mean(v):.1f} ({100 * np.median(v):.1f})' if v else '-'
+    for n in sorted({r['n'] for r in records}):
+        for variant in VARIANTS:
+            sel = [r for r in records if r['n'] == n and r['variant'] == variant]
+            if not sel:
+                continue
+            mid = [r['stream'][min((r['frames'] - K) // 2, len(r['stream']) - 1)] for r in sel]
+            cold = {key: [r[key] for r in records if r['n'] == n and key in r]
+                    for key in ('cold_mid', 'cold_last')}
+            lines.append(
+                f'| {n} | {len(sel)} | {variant} | {cell([np.mean(r["stream"]) for r in sel])} '
+                f'| {cell(mid)} | {cell([r["stream"][-1] for r in sel])} '
+                f'| {cell(cold["cold_mid"])} | {cell(cold["cold_last"])} '
+                f'| {np.median([r["cpu_warm"] for r in sel]):.2f} |')
+    return '\n'.join(lines)
+
+
+def sequence_table(records: Sequence[Dict[str, object]]) -> str:
+    """Markdown: per sequence, every window's mean % per variant and the cold search's."""
+    names = sorted({r['name'] for r in records})
+    by = {(r['name'], r['variant']): r for r in records}
+    variants = [v for v in VARIANTS if any(r['variant'] == v for r in records)]
+    lines = ['| sequence | motions | frames | lines | '
+             + ' | '.join(f'{v}: every / last window' for v in variants)
+             + ' | cold: middle / last |', '|:--|--:|--:|--:|' + '--:|' * (len(variants) + 1)]
+    for name in names:
+        rs = [by[(name, v)] for v in variants if (name, v) in by]
+        r0 = next((r for r in rs if 'cold_mid' in r), rs[0])
+        cells = ' | '.join(f'{100 * np.mean(r["stream"]):.1f} / {100 * r["stream"][-1]:.1f}'
+                           for r in rs)
+        cold = (f'{100 * r0["cold_mid"]:.1f} / {100 * r0["cold_last"]:.1f}'
+                if 'cold_mid' in r0 else '-')
+        lines.append(f'| {name} | {r0["n"]} | {r0["frames"]} | {r0["lines"]} | {cells} '
+                     f'| {cold} |')
+    return '\n'.join(lines)
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    """Command-line options of ``python -m mlofc_ros.bench hopkins_stream``."""
+    p = argparse.ArgumentParser(prog='python -m mlofc_ros.bench hopkins_stream',
+                                description=__doc__.split('\n')[0])
+    p.add_argument('--sequences', default=None,
+                   help='comma-separated sequence names (default all 155)')
+    p.add_argument('--motions', type=int, default=None,
+                   help='only sequences with this many motions (default 3 without '
+                        '--sequences; 0 = all)')
+    p.add_argument('--variants', default=','.join(VARIANTS), help=f'subset of {VARIANTS}')
+    p.add_argument('--windows', type=int, default=None,
+                   help='stop each stream after this many windows (default: its end)')
+    p.add_argument('--quick', action='store_true',
+                   help=f'smoke run: {QUICK_SEQUENCE}, 3 windows, every variant, one process')
+    p.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1))
+    p.add_argument('--out', default=None, help='output folder (default docs/results)')
+    args = p.parse_args(list(argv))
+    if args.quick:
+        args.sequences, args.windows, args.jobs = QUICK_SEQUENCE, 3, 1
+    args.variants = [v.strip() for v in args.variants.split(',') if v.strip()]
+    if not args.variants or set(args.variants) - set(VARIANTS):
+        p.error(f'--variants: choose from {VARIANTS}')
+    return args
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the benchmark; returns the process exit code."""
+    argv = list(argv or [])
+    args = parse_args(argv)
+    paths = hk.list_sequences()
+    if args.sequences:
+        wanted = {s.strip() for s in args.sequences.split(',') if s.strip()}
+        missing = wanted - {p.stem for p in paths}
+        if missing:
+            common.eprint(f'hopkins_stream: unknown sequences {sorted(missing)}')
+            return 2
+        paths = [p for p in paths if p.stem in wanted]
+    motions = args.motions if args.motions is not None else (0 if args.sequences else 3)
+    if motions:
+        paths = [p for p in paths if hk.load_sequence(p).n_motions == motions]
+    # the cold reference once per sequence (it does not depend on the variant)
+    # cut streams (--windows) have no middle or last window to compare with
+    items = [(str(p), v, 155, args.windows, v == args.variants[0] and args.windows is None)
+             for p in paths for v in args.variants]
+    t0 = time.perf_counter()
+    records = common.run_parallel(_unit, items, args.jobs, 'sequences')
+    seconds = time.perf_counter() - t0
+    from mlofc_ros.bench.hopkins import solver_state
+    report = '\n'.join([
+        common.run_header('Hopkins155 line tracks streamed through the warm path of `general`',
+                          common.command_line('hopkins_stream', argv), {
+                              'Sequences': f'{len(paths)}; K = {K}',
+                              'Run time': f'{seconds:.0f} s wall with {args.jobs} worker '
+                                          'process(es)',
+                              'Solver': solver_state()}),
+        __doc__.split('\n\n', 2)[2].strip(), '',
+        '## Misclassification %, mean (median) over sequences', '', summary_table(records), '',
+        "Every window: the mean over the sequence's windows (the first one cold). Middle and "
+
+        'last: the window at the middle / end of the sequence, streamed, against the cold '
+        'search on the same lines and frames.', '',
+        '## Per sequence', '', sequence_table(records), ''])
+    out_dir = common.results_dir(args.out)
+    (out_dir / 'hopkins_stream.md').write_text(report)
+    print(report)
+    return 0
