@@ -234,6 +234,7 @@ def test_warm_path_starts_from_the_previous_labels_of_the_tracks_that_have_one(m
         seen.append([lab.copy() for _, lab in starts])
         return marginal_segmentation(obs, n, starts, *args, **kwargs)
     monkeypatch.setattr(core, 'marginal_segmentation', spy)
+    monkeypatch.setattr(core, 'WARM_KEEP_LABELS', True)
     monkeypatch.setattr(core, 'WARM_ALSO_REASSIGNED', False)
     a, w_a, t_a = spinning_lines(n_lines=20, seed=3)
     b, w_b, t_b = spinning_lines(n_lines=20, seed=4, centre=(-0.4, 0.3, 7.0), deg=-3.0)
