@@ -333,6 +333,23 @@ def run_unit(unit: Unit) -> List[Dict[str, object]]:
     return records
 
 
+def pick_sequences(paths: Sequence[pathlib.Path], names: Optional[Sequence[str]]
+                   ) -> List[pathlib.Path]:
+    """Keep the ``paths`` whose stem is in ``names`` (all for None); ValueError if unknown."""
+    if names is None:
+        return list(paths)
+    missing = set(names) - {p.stem for p in paths}
+    if missing:
+        raise ValueError(f'unknown sequences {sorted(missing)}')
+    return [p for p in paths if p.stem in set(names)]
+
+
+def n_motions_of(path: pathlib.Path) -> int:
+    """Read the number of motions of a sequence file, not its point tracks."""
+    with np.load(path) as z:
+        return int(z['n_motions'])
+
+
 def make_units(paths: Sequence[pathlib.Path], windows: int, methods: Sequence[str],
                seed: int, ks: Sequence[int] = FRAMES) -> List[Unit]:
     """All (sequence, K, window) units; pairing seeds depend on (seed, name, K, window)."""
@@ -819,12 +836,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     wanted = (QUICK_SEQUENCES if args.quick else None) if args.sequences is None else [
         s.strip() for s in args.sequences.split(',') if s.strip()]
-    if wanted is not None:
-        missing = set(wanted) - {p.stem for p in paths}
-        if missing:
-            common.eprint(f'hopkins: unknown sequences {sorted(missing)}')
-            return 2
-        paths = [p for p in paths if p.stem in wanted]
+    try:
+        paths = pick_sequences(paths, wanted)
+    except ValueError as exc:
+        common.eprint(f'hopkins: {exc}')
+        return 2
     units = make_units(paths, args.windows, methods, args.seed, args.ks)
     units.sort(key=lambda u: -(u.k * u.n_motions ** 2))   # biggest first: the pool ends evenly
     common.eprint(f'hopkins: {len(paths)} sequences, {len(units)} windows, '

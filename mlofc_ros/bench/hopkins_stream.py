@@ -46,6 +46,8 @@ import zlib
 import numpy as np
 
 from mlofc_ros.bench import common
+from mlofc_ros.bench.hopkins import (LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX, n_motions_of,
+                                     pick_sequences, solver_state)
 from mlofc_ros.datasets import hopkins as hk
 
 #: Frames per window (`bench hopkins`'s K = 5).
@@ -53,7 +55,6 @@ K = 5
 #: Variant -> (core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED).
 VARIANT_SETTINGS = {'kept': (True, False), 'both': (True, True), 'reassigned': (False, False)}
 VARIANTS = tuple(VARIANT_SETTINGS)
-LINES_PER_MOTION, MIN_LENGTH_PX, MAX_USES = 30, 40.0, 2
 QUICK_SEQUENCE = 'three-cars'
 
 
@@ -200,17 +201,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the benchmark; returns the process exit code."""
     argv = list(argv or [])
     args = parse_args(argv)
-    paths = hk.list_sequences()
-    if args.sequences:
-        wanted = {s.strip() for s in args.sequences.split(',') if s.strip()}
-        missing = wanted - {p.stem for p in paths}
-        if missing:
-            common.eprint(f'hopkins_stream: unknown sequences {sorted(missing)}')
-            return 2
-        paths = [p for p in paths if p.stem in wanted]
+    wanted = [s.strip() for s in args.sequences.split(',') if s.strip()] \
+        if args.sequences else None
+    try:
+        paths = pick_sequences(hk.list_sequences(), wanted)
+    except ValueError as exc:
+        common.eprint(f'hopkins_stream: {exc}')
+        return 2
     motions = args.motions if args.motions is not None else (0 if args.sequences else 3)
     if motions:
-        paths = [p for p in paths if hk.load_sequence(p).n_motions == motions]
+        paths = [p for p in paths if n_motions_of(p) == motions]
     # the cold reference once per sequence (it does not depend on the variant)
     # cut streams (--windows) have no middle or last window to compare with
     items = [(str(p), v, 155, args.windows, v == args.variants[0] and args.windows is None)
@@ -218,7 +218,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     t0 = time.perf_counter()
     records = common.run_parallel(_unit, items, args.jobs, 'sequences')
     seconds = time.perf_counter() - t0
-    from mlofc_ros.bench.hopkins import solver_state
     report = '\n'.join([
         common.run_header('Hopkins155 line tracks streamed through the warm path of `general`',
                           common.command_line('hopkins_stream', argv), {
@@ -229,7 +228,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         __doc__.split('\n\n', 2)[2].strip(), '',
         '## Misclassification %, mean (median) over sequences', '', summary_table(records), '',
         "Every window: the mean over the sequence's windows (the first one cold). Middle and "
-
         'last: the window at the middle / end of the sequence, streamed, against the cold '
         'search on the same lines and frames.', '',
         '## Per sequence', '', sequence_table(records), ''])
