@@ -165,8 +165,8 @@ class Observation:
     ----------
     stamp : float
         The frame's stamp, seconds.
-    gray : (H, W) uint8
-        The image (for a debug drawing).
+    gray : (H, W) uint8 or None
+        The image (for a debug drawing); None for line tracks (:meth:`Pipeline.observe_lines`).
     segments : (M, 4) float32
         Segments of this frame, pixels as detected (distorted).
     track_ids : (M,) uint32
@@ -199,7 +199,7 @@ class Observation:
     """
 
     stamp: float
-    gray: np.ndarray
+    gray: Optional[np.ndarray]
     segments: np.ndarray
     track_ids: np.ndarray
     win_ids: np.ndarray
@@ -216,7 +216,8 @@ class Observation:
     skipped: bool = False
 
     @classmethod
-    def skip(cls, stamp: float, gray: np.ndarray, problem: str, fill: int) -> 'Observation':
+    def skip(cls, stamp: float, gray: Optional[np.ndarray], problem: str, fill: int
+             ) -> 'Observation':
         """Make the observation of a frame not processed (``problem`` says why), no resets."""
         return cls(stamp, gray, np.zeros((0, 4), np.float32), np.zeros(0, np.uint32),
                    np.zeros(0, np.int64), np.zeros((0, 0, 4)), None, (0, 0), fill, math.nan,
@@ -254,6 +255,50 @@ def _lookup(keys: np.ndarray, table_keys: np.ndarray, table_values: np.ndarray,
     hit = sk[pos] == keys
     out[hit] = np.asarray(table_values)[order][pos[hit]]
     return out
+
+
+def check_lines(track_ids: Any, segments: Any) -> Tuple[np.ndarray, np.ndarray]:
+    """Validate one frame of line tracks: ``(ids (M,) uint32, segments (M, 4) float32)``.
+
+    ``track_ids`` integers in ``[0, 2**32)``, unique; ``segments (M, 4)`` px, finite, each
+    longer than 1e-3 px. Raises ``ValueError`` naming the first problem.
+    """
+    ids = np.asarray(track_ids)
+    seg = np.asarray(segments)
+    if ids.ndim != 1:
+        raise ValueError(f'track_ids must be a 1-D array, got shape {ids.shape}')
+    if ids.size and ids.dtype.kind not in 'iu':
+        raise ValueError(f'track_ids must be integers, got dtype {ids.dtype}')
+    if seg.shape != (ids.size, 4) and not (ids.size == 0 and seg.size == 0):
+        raise ValueError(f'segments must be ({ids.size}, 4) for {ids.size} track ids, got '
+                         f'shape {seg.shape}')
+    seg = seg.astype(np.float64).reshape(-1, 4)
+    ids64 = ids.astype(np.int64)
+    if ids.size and (ids64.min() < 0 or ids64.max() >= 2 ** 32):
+        raise ValueError('track_ids must be in [0, 2**32)')
+    if np.unique(ids64).size != ids64.size:
+        raise ValueError('track_ids must be unique within a frame')
+    if not np.all(np.isfinite(seg)):
+        raise ValueError(f'segments must be finite (row {int(np.argmin(np.isfinite(seg).all(1)))} '
+                         'is not)')
+    short = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) <= 1e-3
+    if short.any():
+        raise ValueError(f'segment {int(np.argmax(short))} has zero length: a line needs two '
+                         'distinct endpoints')
+    return ids64.astype(np.uint32), seg.astype(np.float32)
+
+
+def _check_size(image_size: Any) -> Tuple[int, int]:
+    """``(width, height)`` px as two positive integers, else ``ValueError``."""
+    try:
+        w, h = (int(v) for v in image_size)
+        ok = (w, h) == tuple(float(v) for v in image_size)
+    except (TypeError, ValueError):
+        ok = False
+    if not ok or w < 2 or h < 2:
+        raise ValueError(f'image_size must be (width, height) in pixels, each >= 2, got '
+                         f'{image_size!r}')
+    return w, h
 
 
 def make_detector(params: Mapping[str, Any]) -> LineDetector:
@@ -315,6 +360,9 @@ class Pipeline:
         # solve-side resets not handed over yet (a tracker failure, a skipped frame's): the
         # next observation carries them
         self._pending_resets: Set[str] = set()
+        # where the track ids come from: 'image' (this pipeline's tracker, observe) or
+        # 'lines' (the caller's, observe_lines); None until the first frame
+        self._source: Optional[str] = None
 
     # --- configuration -------------------------------------------------------------------
 
@@ -354,7 +402,11 @@ class Pipeline:
             self._warm_floor = None
 
     def reset(self) -> None:
-        """Forget all state (tracks, window, body ids, stamps), as at construction."""
+        """Forget all state (tracks, window, body ids, stamps), as at construction.
+
+        After a reset the pipeline takes images (:meth:`observe`) or line tracks
+        (:meth:`observe_lines`) afresh.
+        """
         self._tracker.reset()
         self._restart_window()
         self.bodies.reset()
@@ -366,6 +418,7 @@ class Pipeline:
         self._image_size = None
         self._forget_focal()
         self._pending_resets = set()
+        self._source = None
 
     def _forget_focal(self) -> None:
         self._focal_samples.clear()
@@ -466,11 +519,69 @@ class Pipeline:
         """
         t0 = time.perf_counter()
         gray = self._check_image(gray)
+        self._check_source('image')
+        return self._observe(stamp_seconds, camera, (int(gray.shape[1]), int(gray.shape[0])),
+                             t0, gray=gray)
+
+    def observe_lines(self, track_ids: np.ndarray, segments: np.ndarray, stamp_seconds: float,
+                      image_size: Tuple[int, int], camera: CameraLike = None) -> Observation:
+        """Add one frame of line segments from your own tracker to the window; do not solve.
+
+        For a stream whose lines are detected and tracked elsewhere (another front end, or
+        point tracks paired into lines): everything after the tracker is the same as for
+        :meth:`observe` (undistortion, window, stamps, focal-length estimation, and in
+        :meth:`solve` the segmentation and the stable body ids).
+
+        Parameters
+        ----------
+        track_ids : (M,) int
+            Persistent id of every segment's track, unique within the frame, in
+            ``[0, 2**32)``. A track keeps its id from frame to frame.
+        segments : (M, 4) float
+            ``(u1, v1, u2, v2)`` px in the (distorted) image, pixel centres at integers; finite,
+            non-zero length.
+        stamp_seconds : float
+            The frame's capture time (s).
+        image_size : (width, height)
+            Pixels (the principal point of an unknown camera is the image centre).
+        camera : (fx, fy, cx, cy) | CameraModel | None
+            As in :meth:`process`.
+
+        Raises ``ValueError`` for malformed lines, a bad image size or camera, or when this
+        pipeline has observed images (its tracker's ids would mix with yours; :meth:`reset`
+        first). Stamps are handled as in :meth:`observe`.
+        """
+        t0 = time.perf_counter()
+        ids, seg = check_lines(track_ids, segments)
+        size = _check_size(image_size)
+        self._check_source('lines')
+        return self._observe(stamp_seconds, camera, size, t0, lines=(ids, seg))
+
+    def process_lines(self, track_ids: np.ndarray, segments: np.ndarray, stamp_seconds: float,
+                      image_size: Tuple[int, int], camera: CameraLike = None) -> FrameResult:
+        """``solve(observe_lines(...))``: segment a stream of your own line tracks, frame by frame.
+
+        Arguments and errors as :meth:`observe_lines`; the result as :meth:`process` (its
+        ``segments`` and ``track_ids`` are the ones given).
+        """
+        return self.solve(self.observe_lines(track_ids, segments, stamp_seconds, image_size,
+                                             camera))
+
+    def _check_source(self, source: str) -> None:
+        """Refuse to mix the tracker's track ids (images) with a caller's (lines)."""
+        if self._source is not None and self._source != source:
+            raise ValueError(f'this pipeline has observed {self._source}; reset() it before '
+                             f'observing {source}')
+        self._source = source
+
+    def _observe(self, stamp_seconds: float, camera: CameraLike, size: Tuple[int, int],
+                 t0: float, gray: Optional[np.ndarray] = None,
+                 lines: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> Observation:
+        """Add a frame to the window: an image (``gray``) or the caller's ``lines``."""
         stamp = float(stamp_seconds)
         if not math.isfinite(stamp):
             raise ValueError(f'stamp must be finite, got {stamp_seconds!r}')
         cam = as_camera(camera)
-        size = (int(gray.shape[1]), int(gray.shape[0]))
         problems: List[str] = []
         resets: Set[str] = set()
 
@@ -517,8 +628,10 @@ class Pipeline:
 
         timings: Dict[str, float] = {}
         t = time.perf_counter()
-        blank = int(gray.max()) - int(gray.min()) <= BLANK_CONTRAST
-        if blank:
+        blank = lines is None and int(gray.max()) - int(gray.min()) <= BLANK_CONTRAST
+        if lines is not None:
+            track_ids, segments = lines
+        elif blank:
             # nothing to see (lens cap, dropped frame): the frame enters the window empty and
             # the tracker carries its tracks from the last frame with content to the next
             problems.append('blank image (no contrast): no lines')
@@ -535,7 +648,7 @@ class Pipeline:
         track_ids = np.asarray(track_ids, dtype=np.uint32).ravel()
         segments = np.asarray(segments, dtype=np.float32).reshape(-1, 4)
         timings['detect_track'] = (time.perf_counter() - t) * 1e3
-        ran = not blank and self._tracker.last_timing['detected']
+        ran = gray is not None and not blank and self._tracker.last_timing['detected']
         timings['detect'] = self._tracker.last_timing['detect'] * 1e3 if ran else 0.0
 
         t = time.perf_counter()

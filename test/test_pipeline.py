@@ -646,3 +646,81 @@ def test_after_a_search_the_warm_start_needs_only_what_the_search_kept(monkeypat
     np.testing.assert_allclose(asked[3:7], 0.62 - pipeline_module.WARM_FLOOR_MARGIN)
     p.reset()                                       # forgotten with the bodies
     assert p._warm_floor is None
+
+
+# --- line tracks from the caller's own tracker (observe_lines / process_lines) ---------------
+
+
+def test_line_tracks_give_what_the_images_give_through_the_same_tracker():
+    # the pipeline's own tracker, run outside it: its ids and segments handed in as line tracks
+    # go through the same window, solver and body ids, bit for bit
+    from mlofc_ros.pipeline import make_tracker
+    seq = render_sequence(2, 8, size=(320, 240), motion='camera_centre', seed=3)
+    images, lines = Pipeline(num_bodies=3), Pipeline(num_bodies=3)
+    tracker = make_tracker(lines.params)
+    for img, t in zip(seq.frames, seq.stamps):
+        a = images.process(img, t, seq.camera)
+        ids, seg = tracker.update(img)
+        b = lines.process_lines(ids, seg, t, (320, 240), seq.camera)
+        np.testing.assert_array_equal(a.track_ids, b.track_ids)
+        np.testing.assert_array_equal(a.segments, b.segments)
+        np.testing.assert_array_equal(a.labels, b.labels)
+        np.testing.assert_array_equal(a.angular_velocities, b.angular_velocities)
+        np.testing.assert_array_equal(a.residuals, b.residuals)
+    assert b.solved and b.window_fill == lines.params['window']
+
+
+def test_line_tracks_of_a_synthetic_stream_are_segmented_with_stable_ids():
+    from mlofc_ros.synthetic import make_scene
+    scene = make_scene(2, 40, n_frames=10, noise_px=0.5, seed=7)
+    fps = 20.0
+    ids = np.arange(1000, 1000 + scene.tracks.shape[0])        # any persistent ids
+    p = Pipeline(num_bodies=2, window=5)
+    results = [p.process_lines(ids, scene.tracks[:, k], k / fps, scene.image_size,
+                               scene.intrinsics) for k in range(scene.tracks.shape[1])]
+    for r in results[4:]:                                     # full windows
+        assert r.solved
+        np.testing.assert_array_equal(r.track_ids, ids)
+        # one stable id per true body, the same in every window
+        pairs = {(int(g), int(s)) for g, s in zip(scene.labels, r.labels) if s >= 0}
+        assert pairs == {(int(g), int(s)) for g, s in zip(scene.labels, results[4].labels)
+                         if s >= 0}
+        assert len(pairs) == 2 and len({s for _, s in pairs}) == 2
+        assert np.mean(r.labels >= 0) >= 0.95
+        for g, s in pairs:
+            np.testing.assert_allclose(r.angular_velocities[s],
+                                       scene.angular_velocities[g] * fps, rtol=0.05, atol=1e-3)
+
+
+@pytest.mark.parametrize('ids, segments, message', [
+    (np.zeros((2, 1), int), np.ones((2, 4)), '1-D'),
+    (np.array([0.0, 1.0]), [[0, 0, 9, 9], [1, 1, 9, 1]], 'integers'),
+    (np.array([0, 1]), np.ones((3, 4)), r'\(2, 4\)'),
+    (np.array([0, 0]), [[0, 0, 9, 9], [1, 1, 9, 1]], 'unique'),
+    (np.array([-1, 0]), [[0, 0, 9, 9], [1, 1, 9, 1]], r'\[0, 2\*\*32\)'),
+    (np.array([0, 2 ** 32]), [[0, 0, 9, 9], [1, 1, 9, 1]], r'\[0, 2\*\*32\)'),
+    (np.array([0, 1]), [[0, 0, 9, 9], [1, np.nan, 9, 1]], 'finite'),
+    (np.array([0, 1]), [[0, 0, 9, 9], [5, 5, 5, 5]], 'zero length'),
+])
+def test_malformed_line_tracks_are_refused_with_the_reason(ids, segments, message):
+    p = Pipeline(num_bodies=2)
+    with pytest.raises(ValueError, match=message):
+        p.observe_lines(ids, segments, 0.0, (320, 240))
+    r = p.process_lines(np.zeros(0, int), np.zeros((0, 4)), 0.1, (320, 240))   # no lines: fine
+    assert r.labels.shape == (0,) and not r.solved
+
+
+def test_line_tracks_need_an_image_size_and_do_not_mix_with_images():
+    p = Pipeline(num_bodies=2)
+    for size in [(320,), (0, 240), (320.5, 240), None, 'ab']:
+        with pytest.raises(ValueError, match='image_size'):
+            p.observe_lines([0], [[0, 0, 9, 9]], 0.0, size)
+    seq = small_sequence(2)
+    p.observe(seq.frames[0], seq.stamps[0], seq.camera)
+    with pytest.raises(ValueError, match='reset'):
+        p.observe_lines([0], [[0, 0, 9, 9]], seq.stamps[1], (320, 240))
+    p.reset()
+    obs = p.observe_lines([0], [[0, 0, 9, 9]], seq.stamps[1], (320, 240))
+    assert obs.gray is None and obs.window_fill == 1
+    with pytest.raises(ValueError, match='reset'):
+        p.observe(seq.frames[1], seq.stamps[1] + 1.0, seq.camera)

@@ -21,14 +21,16 @@
 window per frame, each warm-started from the previous window's labels and motions. Here the
 line tracks are built once, in the sequence's first frame
 (:func:`mlofc_ros.datasets.hopkins.line_tracks` with all frames, the same pairing rules as
-`bench hopkins`), and a window of K = 5 frames slides by one frame over the whole sequence,
-solved as :meth:`mlofc_ros.pipeline.Pipeline.solve` does: the first window cold, every later
-one with ``init_labels`` / ``init_motions`` from the one before and every body rescanned
-(``pipeline.RESCAN_EVERY_BODY``); focal length unknown, estimated per window until
-``pipeline.FOCAL_SAMPLES`` estimates, then fixed at their median. Body ids are the solver's
-own (the lines are the same in every window, so no id bookkeeping is needed), and every body
-hands its motion on, also one the pipeline would not publish (fewer than
-``pipeline.MIN_BODY_TRACKS`` lines, no covariance), whose motion the pipeline forgets.
+`bench hopkins`), and go frame by frame through
+:meth:`mlofc_ros.pipeline.Pipeline.process_lines` (``method='general'``, ``window`` K = 5,
+the node's other defaults): the node's own solve path, body ids and all. The first frames,
+until the window holds ``pipeline.GENERAL_MIN_FRAMES``, are solved rotation-only; then the
+first full window is searched (from those labels too) and every later one is warm-started
+with every body rescanned (``pipeline.RESCAN_EVERY_BODY``); focal length unknown, estimated
+per window until ``pipeline.FOCAL_SAMPLES`` estimates, then fixed at their median. Scored on
+the published labels of every full window (a line the solver leaves unassigned keeps its last
+body for ``label_memory`` frames, as the node publishes it; ``-1`` counts as wrong). Stamps
+are 30 frames/s (only the published rad/s depend on them).
 
 Variants (``--variants``) set :data:`mlofc_ros.solver.core.WARM_KEEP_LABELS` and
 ``WARM_ALSO_REASSIGNED``: ``kept`` (tracks keep their previous label as the start of the warm
@@ -52,6 +54,8 @@ from mlofc_ros.datasets import hopkins as hk
 
 #: Frames per window (`bench hopkins`'s K = 5).
 K = 5
+#: Stamps of the streamed frames (frames/s).
+FPS = 30.0
 #: Variant -> (core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED).
 VARIANT_SETTINGS = {'kept': (True, False), 'both': (True, True), 'reassigned': (False, False)}
 VARIANTS = tuple(VARIANT_SETTINGS)
@@ -81,7 +85,7 @@ def stream_sequence(path: str, variant: str, seed: int = 155, windows: Optional[
 
 def _stream(path: str, variant: str, seed: int, windows: Optional[int], cold: bool
             ) -> Dict[str, object]:
-    from mlofc_ros import pipeline
+    from mlofc_ros.pipeline import Pipeline
     from mlofc_ros.solver import segment_lines
 
     seq = hk.load_sequence(path)
@@ -91,28 +95,17 @@ def _stream(path: str, variant: str, seed: int, windows: Optional[int], cold: bo
     tracks, truth = hk.line_tracks(seq, LINES_PER_MOTION, None, MIN_LENGTH_PX, seed=s,
                                    max_uses=MAX_USES)
     frames = tracks.shape[1]
-    w, h = seq.image_size
-    labels, motions, focals, fixed = None, None, [], None
+    ids = np.arange(tracks.shape[0])
+    pipe = Pipeline(num_bodies=n, window=K, method='general', seed=s)
     stream, cpu = [], []
-    ends = range(K, frames + 1) if windows is None else range(K, min(frames, K + windows - 1) + 1)
-    for t in ends:                                       # windows, not lines
-        intr = None if fixed is None else (fixed, fixed, w / 2.0, h / 2.0)
-        warm = {} if labels is None else {
-            'init_labels': labels, 'init_motions': motions, 'warm_competes': False,
-            'rescan': list(range(n)) if pipeline.RESCAN_EVERY_BODY else None}
+    end = frames if windows is None else min(frames, K + windows - 1)
+    for t in range(end):                                 # frames, not lines
         c = time.process_time()
-        res = segment_lines(tracks[:, t - K:t], n, intrinsics=intr, image_size=seq.image_size,
-                            method='general', seed=s, **warm)
-        if labels is not None:
+        res = pipe.process_lines(ids, tracks[:, t], t / FPS, seq.image_size)
+        if t >= K:                                       # warm solves of full windows
             cpu.append(time.process_time() - c)
-        if fixed is None and np.isfinite(res.focal_length):
-            focals.append(float(res.focal_length))
-            if len(focals) >= pipeline.FOCAL_SAMPLES:
-                fixed = float(np.median(focals))
-        labels = np.asarray(res.labels)
-        motions = (np.asarray(res.info['segmentation_angular_velocities'], float),
-                   np.asarray(res.info['translation_directions'], float))
-        stream.append(common.misclassification(labels, truth, n))
+        if t >= K - 1:
+            stream.append(common.misclassification(res.labels, truth, n))
     rec = {'name': seq.name, 'group': seq.group, 'n': n, 'frames': frames,
            'lines': int(len(truth)), 'variant': variant, 'stream': stream,
            'cpu_warm': float(np.median(cpu)) if cpu else float('nan')}
