@@ -28,6 +28,7 @@ def test_pipeline_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert 'python -m mlofc_ros.bench pipeline --quick' in text
     assert '## Stages (median / p95 ms per frame)' in text
     assert '## Where the mean goes: frames with and without detection' in text
+    assert '## Calls per frame (machine-independent)' in text
     assert 'rendered 320x240' in text and 'process / LSD' in text
     png = tmp_path / 'pipeline.png'
     assert png.is_file() and png.stat().st_size > 1000
@@ -41,6 +42,16 @@ def test_split_row_counts_both_kinds_of_frame() -> None:
     det_n, det_ms, det_x, det_share, n, ms, x, share = pipeline._split_row(r)
     assert (det_n, n) == (2, 3) and (det_ms, ms) == (20.0, 4.0) and (det_x, x) == (2.0, 0.4)
     assert abs(det_share - 40 / 52) < 1e-12 and abs(share - 12 / 52) < 1e-12
+
+
+def test_calls_per_frame_are_counted_the_same_on_every_run() -> None:
+    # the count does not depend on the machine's speed or load: after the first run (lazy
+    # imports, caches) every run of the same frames counts the same calls
+    seq = pipeline.rendered_sequences([(320, 240)], 6, 1, 0)[0]
+    pipeline.count_calls(seq)
+    a, b = pipeline.count_calls(seq), pipeline.count_calls(seq)
+    np.testing.assert_array_equal(a['calls'], b['calls'])
+    assert a['detected'][0] == 1.0 and np.all(a['calls'] > 100)
 
 
 def test_pipeline_takes_node_parameters(tmp_path: pathlib.Path) -> None:

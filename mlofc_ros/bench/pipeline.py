@@ -184,6 +184,52 @@ def run_sequence(seq: Sequence_, params: Optional[Dict[str, object]] = None
     return {k: np.asarray(v, dtype=np.float64) for k, v in rows.items()}
 
 
+def count_calls(seq: Sequence_, params: Optional[Dict[str, object]] = None
+                ) -> Dict[str, np.ndarray]:
+    """Python-level calls per frame of ``Pipeline.process`` on ``seq`` (cProfile's count).
+
+    Every function call the profiler sees, numpy's and OpenCV's C functions included: at the
+    pipeline's sizes each costs mostly its fixed overhead, so the count is the part of a
+    frame's cost that does not depend on the machine. Returns ``calls`` and ``detected`` (1.0
+    where the tracker ran the detector), one per frame.
+    """
+    import cProfile
+    import pstats
+
+    from mlofc_ros.pipeline import Pipeline
+
+    pipe = Pipeline(**dict(params or {}, num_bodies=seq.num_bodies))
+    calls, detected = [], []
+    for gray, stamp in zip(seq.frames, seq.stamps):
+        prof = cProfile.Profile()
+        prof.enable()
+        r = pipe.process(gray, stamp, seq.camera)
+        prof.disable()
+        calls.append(float(pstats.Stats(prof).total_calls))
+        detected.append(float(r.timings.get('detect', 0.0) > 0.0))
+    return {'calls': np.asarray(calls), 'detected': np.asarray(detected)}
+
+
+def _calls_rows(seqs: Sequence[Sequence_], res: Dict[str, Dict[str, np.ndarray]],
+                calls: Dict[str, Dict[str, np.ndarray]], skip: int) -> List[List[object]]:
+    """Rows of the calls table: per sequence, frames without and with detection."""
+    rows: List[List[object]] = []
+    for s in seqs:
+        if s.name not in calls:
+            continue
+        c = {k: _steady(v, skip) for k, v in calls[s.name].items()}
+        r = {k: _steady(v, skip) for k, v in res[s.name].items()}
+        row: List[object] = [s.name]
+        for m_c, m_r in ((c['detected'] == 0, r['detected'] == 0),
+                         (c['detected'] > 0, r['detected'] > 0)):
+            n = c['calls'][m_c]
+            row += [int(m_c.sum()), int(round(_med(n))) if n.size else '-',
+                    f'{int(n.min())}-{int(n.max())}' if n.size else '-',
+                    1e3 * _med(r['total_cpu'][m_r]) / _med(n) if n.size else math.nan]
+        rows.append(row)
+    return rows
+
+
 def _steady(values: np.ndarray, skip: int) -> np.ndarray:
     return values[skip:] if len(values) > skip + 1 else values
 
@@ -219,6 +265,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--real-frames', type=int, default=80, help='max frames per real sequence')
     ap.add_argument('--method', default=None, help='solver method (default: the default)')
     common.add_param_option(ap, 'num_bodies is')
+    ap.add_argument('--no-calls', dest='count_calls', action='store_false',
+                    help='skip the count of calls per frame (a profiled second pass over the '
+                         'first rendered sequence)')
     ap.add_argument('--quick', action='store_true',
                     help='smoke run: 7 frames of 320x240, no real sequence')
     ap.add_argument('--out', default=None, help='output folder (default docs/results)')
@@ -276,7 +325,8 @@ def plot(path: 'os.PathLike', names: Sequence[str], med: Dict[str, Dict[str, flo
 
 
 def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[Sequence_],
-                 res: Dict[str, Dict[str, np.ndarray]], skip: int, wall: float) -> str:
+                 res: Dict[str, Dict[str, np.ndarray]], skip: int, wall: float,
+                 calls: Optional[Dict[str, Dict[str, np.ndarray]]] = None) -> str:
     head = common.run_header(
         'Pipeline: per-stage timings vs LSD alone', common.command_line('pipeline', argv),
         {'Threads': 'single (`cv2.setNumThreads(1)`, one BLAS thread); the machine is shared, '
@@ -352,8 +402,20 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
               'A frame runs the detector when the tracker asks for it (detection on demand: '
               'every `detect_every`-th frame while new edges appear, up to every '
               '`detect_every_max`-th in a quiet scene). x LSD: the median '
-              '`Pipeline.process` over the median LSD of all frames.', '',
-              '## Stages (median / p95 ms per frame)', '',
+              '`Pipeline.process` over the median LSD of all frames.', '']
+    calls_rows = _calls_rows(seqs, res, calls or {}, skip)
+    if calls_rows:
+        lines += ['## Calls per frame (machine-independent)', '',
+                  common.markdown_table(
+                      ['sequence', 'frames without detection', 'calls (median)',
+                       'calls (range)', 'us CPU per call', 'detection frames',
+                       'calls (median)', 'calls (range)', 'us CPU per call'], calls_rows),
+                  'Python-level calls of `Pipeline.process` per frame, numpy and OpenCV '
+                  "functions included (`cProfile`'s count, a second pass over the same frames); "
+                  'us CPU per call: the median process CPU time of those frames in the timed '
+                  'pass over the median count. At these array sizes most calls cost their fixed '
+                  'overhead, so fewer calls is what makes a frame cheaper on every machine.', '']
+    lines += ['## Stages (median / p95 ms per frame)', '',
               common.markdown_table(
                   ['sequence', 'decode mono8', 'decode bgr8', 'detect/track', 'undistort',
                    'window', 'other (in process)', 'solve', 'pack msg', 'process total',
@@ -398,7 +460,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         res[s.name] = run_sequence(s, args.params)
         r = res[s.name]
         common.eprint(f'  process median {_med(r["total"]):.1f} ms, LSD {_med(r["lsd"]):.1f} ms')
-    report = build_report(args, argv, seqs, res, skip, time.monotonic() - t0)
+    calls = {}
+    if args.count_calls and seqs and seqs[0].kind == 'rendered':
+        common.eprint(f'pipeline: counting calls on {seqs[0].name}')
+        calls[seqs[0].name] = count_calls(seqs[0], args.params)
+    report = build_report(args, argv, seqs, res, skip, time.monotonic() - t0, calls)
     (out / 'pipeline.md').write_text(report)
     print(report)
     return 0
