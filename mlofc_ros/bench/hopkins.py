@@ -338,10 +338,11 @@ def pick_sequences(paths: Sequence[pathlib.Path], names: Optional[Sequence[str]]
     """Keep the ``paths`` whose stem is in ``names`` (all for None); ValueError if unknown."""
     if names is None:
         return list(paths)
-    missing = set(names) - {p.stem for p in paths}
+    wanted = set(names)
+    missing = wanted - {p.stem for p in paths}
     if missing:
         raise ValueError(f'unknown sequences {sorted(missing)}')
-    return [p for p in paths if p.stem in set(names)]
+    return [p for p in paths if p.stem in wanted]
 
 
 def n_motions_of(path: pathlib.Path) -> int:

@@ -220,12 +220,12 @@ def _calls_rows(seqs: Sequence[Sequence_], res: Dict[str, Dict[str, np.ndarray]]
         c = {k: _steady(v, skip) for k, v in calls[s.name].items()}
         r = {k: _steady(v, skip) for k, v in res[s.name].items()}
         row: List[object] = [s.name]
-        for m_c, m_r in ((c['detected'] == 0, r['detected'] == 0),
-                         (c['detected'] > 0, r['detected'] > 0)):
-            n = c['calls'][m_c]
-            row += [int(m_c.sum()), int(round(_med(n))) if n.size else '-',
+        # the count's own detection frames select the timed pass's CPU too (same frames)
+        for m in (c['detected'] == 0, c['detected'] > 0):
+            n = c['calls'][m]
+            row += [int(m.sum()), int(round(_med(n))) if n.size else '-',
                     f'{int(n.min())}-{int(n.max())}' if n.size else '-',
-                    1e3 * _med(r['total_cpu'][m_r]) / _med(n) if n.size else math.nan]
+                    1e3 * _med(r['total_cpu'][m]) / _med(n) if n.size else math.nan]
         rows.append(row)
     return rows
 
