@@ -18,16 +18,16 @@ $(STAMP): requirements-ros.txt requirements-dev.txt setup.py
 setup: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m mlofc_ros.demo
+	$(PY) -m mlofc_tools.demo
 
 test: $(STAMP)
 	$(PY) -m pytest -q test
 
 bench: $(STAMP)
-	$(PY) -m mlofc_ros.bench all
+	$(PY) -m mlofc_tools.bench all
 
 lint: $(STAMP)
-	$(PY) -m flake8 mlofc_ros test
+	$(PY) -m flake8 mlofc_ros mlofc_tools test
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

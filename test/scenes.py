@@ -11,7 +11,7 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Small self-contained scene generator for solver tests (independent of mlofc_ros.synthetic)."""
+"""Small self-contained scene generator for solver tests (independent of mlofc_tools.synthetic)."""
 import numpy as np
 
 from mlofc_ros.solver.lines import rotation_matrix

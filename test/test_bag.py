@@ -137,7 +137,7 @@ def test_mlofc_bag_user_errors_exit_cleanly(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_mlofc_bag_end_to_end(tmp_path):
-    from mlofc_ros.render import render_sequence
+    from mlofc_tools.render import render_sequence
     from mlofc_ros.ros_messages import parse_segments_msg, parse_twist_msg
 
     seq = render_sequence(n_boxes=1, n_frames=8, size=(320, 240), seed=3)

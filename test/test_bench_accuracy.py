@@ -12,14 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Smoke test of ``python -m mlofc_ros.bench accuracy --quick`` and its outlier generator."""
+"""Smoke test of ``python -m mlofc_tools.bench accuracy --quick`` and its outlier generator."""
 import pathlib
 
 import numpy as np
 import pytest
 
-from mlofc_ros.bench import accuracy
-from mlofc_ros.synthetic import make_scene
+from mlofc_tools.bench import accuracy
+from mlofc_tools.synthetic import make_scene
 
 SECTION_TITLES = (
     '## Goals',
@@ -37,7 +37,7 @@ def test_quick_run_writes_every_section(tmp_path: pathlib.Path) -> None:
     for title in SECTION_TITLES:
         assert title in text, f'{title!r} missing from accuracy.md'
     # every section names the command that reruns it
-    assert text.count('Command: `python -m mlofc_ros.bench accuracy --sections') == 5
+    assert text.count('Command: `python -m mlofc_tools.bench accuracy --sections') == 5
     for name in ('floor', 'outliers', 'frames', 'speed'):
         png = tmp_path / f'accuracy_{name}.png'
         assert png.is_file() and png.stat().st_size > 1000, png

@@ -11,7 +11,7 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Smoke runs of ``python -m mlofc_ros.bench pipeline|ros|live|soak --quick``: reports."""
+"""Smoke runs of ``python -m mlofc_tools.bench pipeline|ros|live|soak --quick``: reports."""
 import os
 import pathlib
 import tempfile
@@ -19,13 +19,13 @@ import tempfile
 import numpy as np
 import pytest
 
-from mlofc_ros.bench import pipeline, soak
+from mlofc_tools.bench import pipeline, soak
 
 
 def test_pipeline_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert pipeline.main(['--quick', '--out', str(tmp_path)]) == 0
     text = (tmp_path / 'pipeline.md').read_text()
-    assert 'python -m mlofc_ros.bench pipeline --quick' in text
+    assert 'python -m mlofc_tools.bench pipeline --quick' in text
     assert '## Stages (median / p95 ms per frame)' in text
     assert '## Where the mean goes: frames with and without detection' in text
     assert '## Calls per frame (machine-independent)' in text
@@ -83,7 +83,7 @@ def test_soak_quick_writes_report(tmp_path: pathlib.Path) -> None:
 
 def test_ros_quick_writes_report(tmp_path: pathlib.Path) -> None:
     pytest.importorskip('rclpy')
-    from mlofc_ros.bench import ros
+    from mlofc_tools.bench import ros
     os.environ.setdefault('HOME', tempfile.gettempdir())
     assert ros.main(['--quick', '--out', str(tmp_path)]) == 0
     text = (tmp_path / 'ros.md').read_text()
@@ -96,7 +96,7 @@ def test_ros_quick_writes_report(tmp_path: pathlib.Path) -> None:
 
 
 def test_ros_process_times_are_read_back_by_frame_range(tmp_path: pathlib.Path) -> None:
-    from mlofc_ros.bench import ros
+    from mlofc_tools.bench import ros
     stats = tmp_path / 'node_stats.json'
     wall, cpu = ros.read_proc_times(stats, 0, 5)          # nothing written yet
     assert wall.shape == cpu.shape == (0,)
@@ -108,7 +108,7 @@ def test_ros_process_times_are_read_back_by_frame_range(tmp_path: pathlib.Path) 
 
 def test_live_quick_writes_report(tmp_path: pathlib.Path) -> None:
     pytest.importorskip('rclpy')
-    from mlofc_ros.bench import live
+    from mlofc_tools.bench import live
     os.environ.setdefault('HOME', tempfile.gettempdir())
     assert live.main(['--quick', '--out', str(tmp_path)]) == 0
     text = (tmp_path / 'live.md').read_text()
@@ -122,7 +122,7 @@ def test_live_quick_writes_report(tmp_path: pathlib.Path) -> None:
 
 
 def test_ros_headline_names_the_limit_or_says_it_is_above() -> None:
-    from mlofc_ros.bench import ros
+    from mlofc_tools.bench import ros
 
     def row(rate: float, dropped: int) -> dict:
         return {'rate': rate, 'dropped': dropped, 'published': 100,
@@ -136,7 +136,7 @@ def test_ros_headline_names_the_limit_or_says_it_is_above() -> None:
 
 
 def test_covariance_quick_writes_report(tmp_path: pathlib.Path) -> None:
-    from mlofc_ros.bench import covariance
+    from mlofc_tools.bench import covariance
     assert covariance.main(['--quick', '--out', str(tmp_path)]) == 0
     text = (tmp_path / 'covariance.md').read_text()
     rows = {ln.split('|')[1].strip(): ln.split('|') for ln in text.splitlines()

@@ -11,13 +11,13 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Scoring of ``python -m mlofc_ros.bench spinning`` on hand-made frames (no rendering)."""
+"""Scoring of ``python -m mlofc_tools.bench spinning`` on hand-made frames (no rendering)."""
 from types import SimpleNamespace
 
 import numpy as np
 
-from mlofc_ros.bench import __main__ as dispatcher
-from mlofc_ros.bench import spinning
+from mlofc_tools.bench import __main__ as dispatcher
+from mlofc_tools.bench import spinning
 
 
 def _scene():

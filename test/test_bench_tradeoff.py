@@ -11,12 +11,12 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""``python -m mlofc_ros.bench tradeoff`` (grid, front, a small run) and ``bench all``."""
+"""``python -m mlofc_tools.bench tradeoff`` (grid, front, a small run) and ``bench all``."""
 import pathlib
 
 from mlofc_ros import params
-from mlofc_ros.bench import tradeoff
-from mlofc_ros.bench.__main__ import BENCHMARKS
+from mlofc_tools.bench import tradeoff
+from mlofc_tools.bench.__main__ import BENCHMARKS
 from mlofc_ros.pipeline import make_tracker
 
 
@@ -59,7 +59,7 @@ def test_small_run_writes_report(tmp_path: pathlib.Path) -> None:
             '--seeds', '0', '--timing-frames', '8', '--out', str(tmp_path)]
     assert tradeoff.main(argv) == 0
     text = (tmp_path / 'tradeoff.md').read_text()
-    assert 'python -m mlofc_ros.bench tradeoff --scales 0.5' in text
+    assert 'python -m mlofc_tools.bench tradeoff --scales 0.5' in text
     rows = [line for line in text.splitlines() if line.startswith('| 0.5 |')]
     assert len(rows) == 2 and {row.split('|')[2].strip() for row in rows} == {'3', '6'}
     assert '2 / 2' in text or '1 / 2' in text or '0 / 2' in text
@@ -71,7 +71,7 @@ def test_bench_all_runs_every_benchmark_and_reports_the_worst(monkeypatch) -> No
     import importlib
     import types
 
-    from mlofc_ros.bench import __main__ as bench_main
+    from mlofc_tools.bench import __main__ as bench_main
     ran = []
 
     def fake_import(name: str) -> types.SimpleNamespace:
@@ -90,7 +90,7 @@ def test_bench_all_runs_every_benchmark_and_reports_the_worst(monkeypatch) -> No
 
 
 def test_pooled_score_weights_sequences_and_goal_per_sequence() -> None:
-    from mlofc_ros.bench import frontend
+    from mlofc_tools.bench import frontend
     scores = [{'tracked_5': 1.0, 'windows': 30, 'id_switch_pct': 0.5, 'transitions': 100},
               {'tracked_5': 0.5, 'windows': 10, 'id_switch_pct': float('nan'),
                'transitions': 0}]

@@ -20,7 +20,7 @@ import sys
 import numpy as np
 import pytest
 
-from mlofc_ros import demo
+from mlofc_tools import demo
 
 
 def test_match_segments_accepts_parts_of_edges():
@@ -46,7 +46,7 @@ def test_match_bodies_maximises_overlap():
 @pytest.mark.slow
 def test_demo_runs_the_node_as_a_subprocess(tmp_path):
     proc = subprocess.run(
-        [sys.executable, '-m', 'mlofc_ros.demo', '--frames', '20', '--out', str(tmp_path)],
+        [sys.executable, '-m', 'mlofc_tools.demo', '--frames', '20', '--out', str(tmp_path)],
         capture_output=True, text=True, timeout=150)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     out = proc.stdout

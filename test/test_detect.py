@@ -44,7 +44,7 @@ def _on_line(seg, gt, angle_deg=3.0, dist_px=2.0):
 
 
 def test_detects_rendered_gt_edges():
-    render = pytest.importorskip('mlofc_ros.render')
+    render = pytest.importorskip('mlofc_tools.render')
     seq = render.render_sequence(n_boxes=2, n_frames=1, size=(640, 480), seed=0)
     truth = seq.truth[0]
     det = LineDetector(min_length=20.0)
@@ -160,7 +160,7 @@ def test_coarse_lsd_bins_find_the_same_edges():
     # LSD seeds regions in the order of its gradient-norm bins; 32 bins instead of OpenCV's
     # 1024 (the default) only reorder seeds of about the same strength (the sort of every
     # pixel is most of LSD's time on a noisy image)
-    render = pytest.importorskip('mlofc_ros.render')
+    render = pytest.importorskip('mlofc_tools.render')
     seq = render.render_sequence(n_boxes=3, n_frames=1, size=(640, 480), seed=1,
                                  noise_sigma=2.0)
     truth = seq.truth[0]

@@ -17,8 +17,8 @@ import pathlib
 import numpy as np
 import pytest
 
-from mlofc_ros.bench import hopkins as bench
-from mlofc_ros.datasets import hopkins as hk
+from mlofc_tools.bench import hopkins as bench
+from mlofc_tools.datasets import hopkins as hk
 
 DATA = hk.DEFAULT_DATA_DIR
 pytestmark = pytest.mark.skipif(not (DATA / '1R2RC.npz').is_file(),
@@ -178,7 +178,7 @@ def test_warm_path_keeps_a_right_grouping_on_a_real_stream(monkeypatch) -> None:
     # reassigning every track by the fitted-direction costs at the previous motions (before
     # session 28) gave two bodies' lines to one in the sixth window (33% wrong); keeping the
     # previous labels does not
-    from mlofc_ros.bench import hopkins_stream
+    from mlofc_tools.bench import hopkins_stream
     from mlofc_ros.solver import core
     for name in ('WARM_KEEP_LABELS', 'WARM_ALSO_REASSIGNED'):     # restored afterwards
         monkeypatch.setattr(core, name, getattr(core, name))
@@ -191,7 +191,7 @@ def test_warm_path_keeps_a_right_grouping_on_a_real_stream(monkeypatch) -> None:
 
 
 def test_quick_stream_benchmark(tmp_path: pathlib.Path) -> None:
-    from mlofc_ros.bench import hopkins_stream
+    from mlofc_tools.bench import hopkins_stream
     from mlofc_ros.solver import core
     defaults = core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED
     assert hopkins_stream.parse_args([]).motions is None

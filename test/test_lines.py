@@ -17,7 +17,7 @@ import pytest
 
 from mlofc_ros.solver.core import _check_tracks
 from mlofc_ros.solver.lines import interpretation_normals, line_flows, whiten_tracks
-from mlofc_ros.synthetic import make_scene
+from mlofc_tools.synthetic import make_scene
 
 
 def dense_whiten(n_tracks, n_slots, ti, ki, E, cov0, cov1, M, b):

@@ -23,7 +23,7 @@ import pytest
 
 from mlofc_ros.bodies import assign, BodyTracker, relabel
 from mlofc_ros.pipeline import FOCAL_SAMPLES, FrameResult, Pipeline, TIMING_KEYS
-from mlofc_ros.render import render_sequence
+from mlofc_tools.render import render_sequence
 from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import segment_lines
 
@@ -671,7 +671,7 @@ def test_line_tracks_give_what_the_images_give_through_the_same_tracker():
 
 
 def test_line_tracks_of_a_synthetic_stream_are_segmented_with_stable_ids():
-    from mlofc_ros.synthetic import make_scene
+    from mlofc_tools.synthetic import make_scene
     scene = make_scene(2, 40, n_frames=10, noise_px=0.5, seed=7)
     fps = 20.0
     ids = np.arange(1000, 1000 + scene.tracks.shape[0])        # any persistent ids

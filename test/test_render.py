@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from mlofc_ros.camera import CameraModel
-from mlofc_ros.render import FrameTruth, render_sequence, RenderedSequence
-from mlofc_ros.render.geometry import distort_pixels, so3_exp
+from mlofc_tools.render import FrameTruth, render_sequence, RenderedSequence
+from mlofc_tools.render.geometry import distort_pixels, so3_exp
 
 DIST = (-0.28, 0.09, 0.001, -0.0015, -0.01)
 

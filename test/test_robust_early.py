@@ -14,11 +14,11 @@
 """Early accept of the robust solver's first start, and its fallback to the full search."""
 import numpy as np
 
-from mlofc_ros.bench.common import best_permutation
+from mlofc_tools.bench.common import best_permutation
 from mlofc_ros.solver import robust, segment_lines
 from mlofc_ros.solver.lines import line_flows
 from mlofc_ros.solver.models import fit_bodies, track_costs, track_stats
-from mlofc_ros.synthetic import make_scene
+from mlofc_tools.synthetic import make_scene
 
 
 def _scene(seed, k=5):

@@ -20,7 +20,7 @@ from mlofc_ros.solver.ksubspaces import trim_bound
 from mlofc_ros.solver.lines import line_flows, rotvec_to_cayley
 from mlofc_ros.solver.models import chi2_quantile, solve_normal_equations, track_stats
 from mlofc_ros.solver.veronese import embed
-from mlofc_ros.synthetic import make_scene
+from mlofc_tools.synthetic import make_scene
 
 
 def _flows(noise_px, seed=3, k=5):

@@ -15,9 +15,9 @@
 import numpy as np
 import pytest
 
-from mlofc_ros.bench.common import best_permutation, motion_errors
+from mlofc_tools.bench.common import best_permutation, motion_errors
 from mlofc_ros.solver import segment_lines
-from mlofc_ros.synthetic import make_scene
+from mlofc_tools.synthetic import make_scene
 
 
 def _wrong(labels, truth, n):

@@ -15,8 +15,8 @@
 import numpy as np
 import pytest
 
-from mlofc_ros.bench import common
-from mlofc_ros.synthetic import make_scene, rotation_matrices
+from mlofc_tools.bench import common
+from mlofc_tools.synthetic import make_scene, rotation_matrices
 
 
 def _normals(tracks: np.ndarray, intrinsics) -> np.ndarray:
@@ -138,7 +138,7 @@ def test_paper_bench_quick(tmp_path):
         from mlofc_ros.solver import METHODS, segment_lines  # noqa: F401
     except ImportError as exc:
         pytest.skip(f'solver not importable yet: {exc}')
-    from mlofc_ros.bench import paper
+    from mlofc_tools.bench import paper
     rc = paper.main(['--quick', '--trials', '1', '--jobs', '1', '--out', str(tmp_path)])
     assert rc == 0
     text = (tmp_path / 'paper.md').read_text()

@@ -20,7 +20,7 @@ from mlofc_ros.tracks.tracker import _remap_velocity, LineTracker, refine_lines
 
 @pytest.fixture(scope='module')
 def sequence():
-    render = pytest.importorskip('mlofc_ros.render')
+    render = pytest.importorskip('mlofc_tools.render')
     return render.render_sequence(n_boxes=2, n_frames=8, size=(640, 480),
                                   motion='camera_centre', seed=0)
 
@@ -164,8 +164,8 @@ def test_own_centre_spinning_boxes_keep_ids():
     0.955 precision; without the turn-rate prediction, textured-only along-line KLT motion and
     the second-chance association it was 0.874, 2.1% and 0.928.
     """
-    render = pytest.importorskip('mlofc_ros.render')
-    from mlofc_ros.bench.frontend import score_tracks
+    render = pytest.importorskip('mlofc_tools.render')
+    from mlofc_tools.bench.frontend import score_tracks
     seq = render.render_sequence(n_boxes=2, n_frames=16, size=(640, 480), motion='own_centre',
                                  seed=0)
     tr = LineTracker()
@@ -183,7 +183,7 @@ def test_own_centre_spinning_boxes_keep_ids():
 
 
 def test_unresolvable_edges_marks_only_close_parallel_overlapping_pairs():
-    from mlofc_ros.bench.frontend import unresolvable_edges
+    from mlofc_tools.bench.frontend import unresolvable_edges
     gt = np.array([[0.0, 0.0, 100.0, 0.0],       # 0: 1 px from 1 over its whole length
                    [0.0, 1.0, 100.0, 1.5],       # 1: 0.3 deg off 0
                    [0.0, 10.0, 100.0, 10.0],     # 2: 9 px from 1: resolvable

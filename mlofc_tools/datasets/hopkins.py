@@ -39,11 +39,13 @@ from typing import List, Optional, Tuple, Union
 
 import numpy as np
 
+from mlofc_tools.datasets.shared import shared_data_dir
+
 PathLike = Union[str, 'os.PathLike[str]']
 
 #: Folder of the ``.npz`` files: ``$MLOFC_HOPKINS_DIR`` if set, else the project's shared copy.
 DEFAULT_DATA_DIR = pathlib.Path(os.environ.get('MLOFC_HOPKINS_DIR',
-                                               '/work/shared/data/hopkins155'))
+                                               shared_data_dir() / 'hopkins155'))
 
 #: Benchmark groups (the benchmark's README); ``extra`` is ``dancing``, not one of the 155.
 GROUPS = ('checkerboard', 'traffic', 'articulated', 'extra')

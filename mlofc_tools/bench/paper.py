@@ -13,7 +13,7 @@
 # limitations under the License.
 """The paper's synthetic experiments (section 4.1, Fig. 2-5), rerun for every solver method.
 
-``python -m mlofc_ros.bench paper [--trials 50] [--quick] [--out DIR] [--jobs 2]`` writes
+``python -m mlofc_tools.bench paper [--trials 50] [--quick] [--out DIR] [--jobs 2]`` writes
 ``paper.md`` and ``paper_fig2.png`` .. ``paper_fig5.png`` to ``docs/results/`` (or ``--out``) and
 prints the tables.
 
@@ -40,8 +40,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from mlofc_ros.bench import common
-from mlofc_ros.synthetic import make_scene
+from mlofc_tools.bench import common
+from mlofc_tools.synthetic import make_scene
 
 FLOOR = 'floor (unweighted)'
 FLOOR_W = 'floor (weighted)'
@@ -80,7 +80,7 @@ class Experiment:
         return 't = |T| / |w| (scene units per rad)'
 
     def scene_kwargs(self, x: float) -> Dict[str, object]:
-        """Keyword arguments of :func:`mlofc_ros.synthetic.make_scene` at sweep value ``x``."""
+        """Keyword arguments of :func:`mlofc_tools.synthetic.make_scene` at sweep value ``x``."""
         kw: Dict[str, object] = {'noise_px': self.noise_px, 'translation_ratio': 0.0,
                                  'pure_translation_body': self.pure_translation_body}
         kw[self.sweep] = float(x)
@@ -415,7 +415,7 @@ def plot_experiment(exp: Experiment, stats: Dict[Key, Dict[str, float]],
 HOW_TO_READ = """\
 ## How to read
 
-- Scenes follow the paper's section 4.1 (`mlofc_ros.synthetic.make_scene`): 1000 x 1000 px,
+- Scenes follow the paper's section 4.1 (`mlofc_tools.synthetic.make_scene`): 1000 x 1000 px,
   f = 1000 px, principal point at the centre, random 3D segments 5-8 units deep and 50-400 px
   long, each body rotating about the camera centre by 2-6 deg per frame about a random axis,
   Gaussian noise on every endpoint coordinate, endpoints sliding along their 3D line between
@@ -480,8 +480,8 @@ def build_report(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    """Command-line options of ``python -m mlofc_ros.bench paper``."""
-    p = argparse.ArgumentParser(prog='python -m mlofc_ros.bench paper', description=__doc__,
+    """Command-line options of ``python -m mlofc_tools.bench paper``."""
+    p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench paper', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--trials', type=int, default=None,
                    help='scenes per point (default 50; 2 with --quick)')

@@ -65,7 +65,7 @@ def write_report(out: Optional[str], name: str, text: str) -> pathlib.Path:
 
 def command_line(name: str, argv: Sequence[str]) -> str:
     """Shell command that reruns benchmark ``name`` with ``argv`` (for the report)."""
-    return ' '.join(['python', '-m', 'mlofc_ros.bench', name, *map(shlex.quote, argv)])
+    return ' '.join(['python', '-m', 'mlofc_tools.bench', name, *map(shlex.quote, argv)])
 
 
 def run_header(title: str, command: str, extra: Optional[Mapping[str, str]] = None) -> str:

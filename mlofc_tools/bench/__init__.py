@@ -13,5 +13,5 @@
 # limitations under the License.
 """Benchmarks: each writes Markdown tables and PNG plots to ``docs/results/``.
 
-Run ``python -m mlofc_ros.bench NAME [options]``; ``python -m mlofc_ros.bench --help`` lists them.
+Run ``python -m mlofc_tools.bench NAME [options]``; ``python -m mlofc_tools.bench --help`` lists them.
 """

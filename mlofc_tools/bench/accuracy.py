@@ -13,7 +13,7 @@
 # limitations under the License.
 """Accuracy of the solver: robust vs the floor, outliers, frames, number of bodies, speed.
 
-``python -m mlofc_ros.bench accuracy [--trials 50] [--quick] [--out DIR] [--jobs 2]
+``python -m mlofc_tools.bench accuracy [--trials 50] [--quick] [--out DIR] [--jobs 2]
 [--seed 4711] [--sections speed,floor,outliers,frames,nbodies]`` writes ``accuracy.md`` and
 ``accuracy_*.png`` to ``docs/results/`` (or ``--out``) and prints the report.
 
@@ -43,8 +43,8 @@ import mlofc_ros  # noqa: F401 (first of the package: one BLAS thread, set befor
 
 import numpy as np  # noqa: I100 (numpy must load after mlofc_ros, see above)
 
-from mlofc_ros.bench import common
-from mlofc_ros.synthetic import make_scene
+from mlofc_tools.bench import common
+from mlofc_tools.synthetic import make_scene
 
 FLOOR = 'floor (unweighted)'
 FLOOR_W = 'floor (weighted)'
@@ -902,7 +902,7 @@ def section_speed(speed: Dict[int, Dict[str, Dict[str, np.ndarray]]], grid: Grid
         f'{os.cpu_count()} cores, so the wall times are inflated by the other processes; the '
         'CPU times (this process only) are the uncontended estimate, and the ratios to the '
         'reference workload (CPU over CPU, same run) compare across machines. Reference: '
-        '`mlofc_ros.bench.accuracy.reference_workload` (QR, normal equations and SVD of a '
+        '`mlofc_tools.bench.accuracy.reference_workload` (QR, normal equations and SVD of a '
         '4000 x 12 matrix, row norms, exp and sort of 50 000 numbers); median of its '
         f'{ref_cpu.size} timings {np.median(ref_cpu):.2f} ms CPU (p90 '
         f'{np.percentile(ref_cpu, 90):.2f}), {np.median(ref_wall):.2f} ms wall (p90 '
@@ -960,8 +960,8 @@ def solver_revision() -> str:
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    """Command-line options of ``python -m mlofc_ros.bench accuracy``."""
-    p = argparse.ArgumentParser(prog='python -m mlofc_ros.bench accuracy', description=__doc__,
+    """Command-line options of ``python -m mlofc_tools.bench accuracy``."""
+    p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench accuracy', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--trials', type=int, default=None,
                    help='scenes per point (default 50; 2 with --quick)')

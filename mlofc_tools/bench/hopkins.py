@@ -13,14 +13,14 @@
 # limitations under the License.
 """Hopkins155: real line tracks from pairs of tracked points, every solver method, f unknown.
 
-``python -m mlofc_ros.bench hopkins [--windows 2] [--quick] [--methods ...] [--out DIR]``
+``python -m mlofc_tools.bench hopkins [--windows 2] [--quick] [--methods ...] [--out DIR]``
 writes ``hopkins.md`` and ``hopkins.png`` to ``docs/results/`` (or ``--out``) and prints the
 report.
 
 For every benchmark sequence (155; ``dancing`` excluded), ``--windows`` windows spread evenly over
 the sequence, and K = 2 (two consecutive frames, as the paper) and K = 5 frames (``--ks`` adds
 others, e.g. ``--ks 2,5,10``), the line tracks come from
-:func:`mlofc_ros.datasets.hopkins.line_tracks` (pairs of same-motion points, see there) and
+:func:`mlofc_tools.datasets.hopkins.line_tracks` (pairs of same-motion points, see there) and
 every method of :data:`mlofc_ros.solver.METHODS` segments them with the true number
 of motions and UNKNOWN intrinsics (principal point at the image centre, focal length estimated;
 the files' K is only a normalisation). Misclassification: best relabelling, ``-1`` wrong.
@@ -49,8 +49,8 @@ import zlib
 
 import numpy as np
 
-from mlofc_ros.bench import common
-from mlofc_ros.datasets import hopkins as hk
+from mlofc_tools.bench import common
+from mlofc_tools.datasets import hopkins as hk
 
 ORACLE = 'oracle (weighted)'
 ORACLE_U = 'oracle (unweighted)'
@@ -610,7 +610,7 @@ frame, taken in a random order (fixed seed per sequence, K and window) while bot
 been used in fewer than {MAX_USES} lines, up to {LINES_PER_MOTION} lines per motion (the paper's
 m). A motion with few well-separated points gets fewer lines (column "fewest lines of a
 motion"). The endpoints of a line in every frame are its two points
-(`mlofc_ros.datasets.hopkins.line_tracks`); the solver only uses the line through them.
+(`mlofc_tools.datasets.hopkins.line_tracks`); the solver only uses the line through them.
 Every method gets the TRUE number of motions and no intrinsics (`intrinsics=None`,
 `image_size=(w, h)`: principal point at the image centre, focal length estimated per window).
 Misclassification: best relabelling of the predicted bodies; unassigned lines (`-1`) count as
@@ -745,8 +745,8 @@ def plot(records, methods: Sequence[str], path: pathlib.Path) -> None:
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    """Command-line options of ``python -m mlofc_ros.bench hopkins``."""
-    p = argparse.ArgumentParser(prog='python -m mlofc_ros.bench hopkins', description=__doc__,
+    """Command-line options of ``python -m mlofc_tools.bench hopkins``."""
+    p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench hopkins', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--windows', type=int, default=None,
                    help='windows per sequence and K (default 2; 1 with --quick)')

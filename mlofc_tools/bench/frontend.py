@@ -13,7 +13,7 @@
 # limitations under the License.
 """Front-end benchmark: line detection and tracking on rendered and real sequences.
 
-Run ``python -m mlofc_ros.bench frontend`` (or ``python -m mlofc_ros.bench.frontend``); writes
+Run ``python -m mlofc_tools.bench frontend`` (or ``python -m mlofc_tools.bench.frontend``); writes
 ``docs/results/frontend.md`` and ``docs/results/frontend.png``.
 """
 import argparse
@@ -29,8 +29,8 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from mlofc_ros.bench import common
-from mlofc_ros.bench.data import shared_data_dir
+from mlofc_tools.bench import common
+from mlofc_tools.datasets.shared import shared_data_dir
 from mlofc_ros.segments.detect import has_ximgproc, LineDetector
 from mlofc_ros.tracks.tracker import LineTracker
 
@@ -263,7 +263,7 @@ def score_tracks(frames_ids: Sequence[np.ndarray], frames_seg: Sequence[np.ndarr
 def rendered_sequences(frames: int, seeds: Sequence[int], motions: Sequence[str],
                        boxes: Sequence[int]) -> List[Tuple[str, object]]:
     """Render the 640x480 test sequences: ``(label, RenderedSequence)`` per motion x seed."""
-    from mlofc_ros.render import render_sequence
+    from mlofc_tools.render import render_sequence
     out = []
     for motion in motions:
         for i, seed in enumerate(seeds):
@@ -509,7 +509,7 @@ def survival_curve(ids: Sequence[np.ndarray], segs: Sequence[np.ndarray],
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench frontend',
+    ap = argparse.ArgumentParser(prog='python -m mlofc_tools.bench frontend',
                                  description='line detection and tracking benchmark')
     ap.add_argument('--frames', type=int, default=30, help='frames per rendered sequence')
     ap.add_argument('--seeds', default='0,1,2,3', help='render seeds (comma separated)')
@@ -675,7 +675,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
         lines += ['Measured in a separate venv holding opencv-contrib-python-headless instead '
                   'of opencv-python-headless (same rendered frames, its own LSD reference in '
                   'the same run): `PYTHONPATH=. /tmp/contrib-venv/bin/python -m '
-                  'mlofc_ros.bench.frontend --detectors-only > contrib.json`, then this report '
+                  'mlofc_tools.bench.frontend --detectors-only > contrib.json`, then this report '
                   'with `--contrib-json contrib.json`.', '', _detector_table(contrib_rows)]
     lines += ['**Choice.** The tracker detects on some frames only (every `detect_every`-th, '
               'or fewer on demand) and carries lines in between (edge search along the '

@@ -13,7 +13,7 @@
 # limitations under the License.
 """Spinning boxes through the running node in real time: a slow solver at camera rates.
 
-Run ``python -m mlofc_ros.bench live``; writes ``docs/results/live.md``. Where ``bench
+Run ``python -m mlofc_tools.bench live``; writes ``docs/results/live.md``. Where ``bench
 spinning`` feeds every frame to :class:`~mlofc_ros.pipeline.Pipeline` and waits for each
 answer, this one publishes the same rendered scenes to ``mlofc_node`` (its own process, fresh
 ``ROS_DOMAIN_ID``, started like ``bench ros``) at a fixed rate, as a camera or a bag played in
@@ -41,15 +41,15 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 # importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
-from mlofc_ros.bench import common
-from mlofc_ros.bench import ros as bench_ros
-from mlofc_ros.bench import spinning
+from mlofc_tools.bench import common
+from mlofc_tools.bench import ros as bench_ros
+from mlofc_tools.bench import spinning
 
 TWIST_TOPIC = '/' + bench_ros.NODE_NAME + '/body_{}/twist'
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench live',
+    ap = argparse.ArgumentParser(prog='python -m mlofc_tools.bench live',
                                  description=__doc__.split('\n')[0])
     ap.add_argument('--scenes', default='own2+bg,own3+bg', help='scenes of bench spinning')
     ap.add_argument('--seeds', default='0,1,2', help='render seeds')
@@ -145,7 +145,7 @@ def answers(bench: LiveBench, stamps: Sequence[int], n_bodies: int) -> List[Any]
 def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
             ) -> Dict[str, Any]:
     """One fresh node, one scene published at ``rate``; counts and scores."""
-    from mlofc_ros.demo import fresh_domain_id
+    from mlofc_tools.demo import fresh_domain_id
     n_bodies = len(seq.body_names)
     domain = fresh_domain_id()
     stats_path = work / f'stats_{domain}.json'
@@ -219,10 +219,10 @@ def summary_rows(records: Sequence[Dict[str, Any]]) -> List[List[object]]:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
-    from mlofc_ros.render import render_sequence
+    from mlofc_tools.render import render_sequence
     t0 = time.monotonic()
     load = os.getloadavg()
-    from mlofc_ros.bench.pipeline import code_revisions
+    from mlofc_tools.bench.pipeline import code_revisions
     revisions = code_revisions()        # before the runs: the code they ran
     records = []
     with tempfile.TemporaryDirectory(prefix='mlofc_live_') as tmp:

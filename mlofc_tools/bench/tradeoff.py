@@ -13,7 +13,7 @@
 # limitations under the License.
 """Speed against tracking quality over the front end's settings: which goal costs which.
 
-Run ``python -m mlofc_ros.bench tradeoff``; writes ``docs/results/tradeoff.md`` and
+Run ``python -m mlofc_tools.bench tradeoff``; writes ``docs/results/tradeoff.md`` and
 ``tradeoff.png``. For every combination of the node parameters ``detector_scale``,
 ``detect_every``, ``bridge_crossings`` and ``detect_every_max`` (``fixed`` = ``detect_every``, a
 fixed rate; a larger value is detection on demand; the rest at their defaults):
@@ -44,8 +44,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from mlofc_ros.bench import common, frontend
-from mlofc_ros.bench.frontend import SWITCH_GOAL_PCT, TRACKED_GOAL
+from mlofc_tools.bench import common, frontend
+from mlofc_tools.bench.frontend import SWITCH_GOAL_PCT, TRACKED_GOAL
 
 #: Issue #7's speed goal: ``Pipeline.process`` / LSD alone, here on the means.
 SPEED_GOAL = 0.5
@@ -56,7 +56,7 @@ Setting = Tuple[float, int, bool, int]
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench tradeoff',
+    ap = argparse.ArgumentParser(prog='python -m mlofc_tools.bench tradeoff',
                                  description=__doc__.split('\n\n')[0])
     ap.add_argument('--scales', default='1.0,0.8,0.7,0.6,0.5', help='detector_scale values')
     ap.add_argument('--every', default='1,2,3,4,5,6,8', help='detect_every values')
@@ -108,7 +108,7 @@ def _sequences(frames: int, seeds: Tuple[int, ...], timing_frames: int) -> Tuple
     Every setting runs on the same frames; rendering them is about a quarter of a setting's
     time, so a worker keeps them.
     """
-    from mlofc_ros.bench import pipeline as bench_pipeline
+    from mlofc_tools.bench import pipeline as bench_pipeline
     timed = bench_pipeline.rendered_sequences([(640, 480)], timing_frames, 2, 0)[0]
     tracking = frontend.rendered_sequences(frames, seeds, ('camera_centre', 'own_centre'),
                                            (2, 3))
@@ -120,7 +120,7 @@ def run_setting(item: Tuple[Setting, int, Sequence[int], int]) -> Dict[str, obje
     import cv2
 
     from mlofc_ros import params as _params
-    from mlofc_ros.bench import pipeline as bench_pipeline
+    from mlofc_tools.bench import pipeline as bench_pipeline
     from mlofc_ros.pipeline import make_tracker
 
     setting, frames, seeds, timing_frames = item

@@ -14,7 +14,7 @@
 """The running node under rising image rates: drops, throughput and latency over DDS.
 
 ``mlofc_node`` runs in its own process on a fresh ``ROS_DOMAIN_ID`` (localhost discovery). It is
-started through a thin wrapper (``python -m mlofc_ros.bench.ros --child STATS -- --ros-args
+started through a thin wrapper (``python -m mlofc_tools.bench.ros --child STATS -- --ros-args
 ...``) that builds the same :class:`~mlofc_ros.node.MlofcNode` as the console script and spins
 it the same way, and in addition writes the node's own counters (``stats``: received,
 processed, dropped by its bounded queue, skipped, errors; plus the frames pending) to a JSON
@@ -27,7 +27,7 @@ waits for the node to drain, and counts the ``~/segments`` messages received (re
 Latency = reception wall time - image stamp (both clocks of this process). A rate is kept up
 with when every published frame is answered and the node dropped none.
 
-Run ``python -m mlofc_ros.bench ros``; writes ``ros.md`` and ``ros.png``.
+Run ``python -m mlofc_tools.bench ros``; writes ``ros.md`` and ``ros.png``.
 """
 import argparse
 import contextlib
@@ -44,7 +44,7 @@ from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tupl
 import numpy as np
 
 # importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
-from mlofc_ros.bench import common
+from mlofc_tools.bench import common
 
 NODE_NAME = 'mlofc'
 IMAGE_TOPIC = '/bench/image_raw'
@@ -162,7 +162,7 @@ class BenchError(Exception):
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench ros',
+    ap = argparse.ArgumentParser(prog='python -m mlofc_tools.bench ros',
                                  description='Node drops and latency at rising image rates.')
     ap.add_argument('--rates', default=DEFAULT_RATES, help=f'Hz, comma separated '
                     f'({DEFAULT_RATES})')
@@ -303,11 +303,11 @@ def _wait(cond: Any, timeout: float, step: float = 0.05) -> bool:
 
 def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
     """Start the node, sweep the rates; returns the per-rate rows and run facts."""
-    from mlofc_ros.demo import fresh_domain_id
-    from mlofc_ros.render import render_sequence
+    from mlofc_tools.demo import fresh_domain_id
+    from mlofc_tools.render import render_sequence
 
     load = os.getloadavg()
-    from mlofc_ros.bench.pipeline import code_revisions
+    from mlofc_tools.bench.pipeline import code_revisions
     code = code_revisions()
     domain = args.domain_id if args.domain_id is not None else fresh_domain_id()
     common.eprint(f'ros: rendering {args.frames} frames {args.wh[0]}x{args.wh[1]}')
@@ -347,8 +347,8 @@ def running_node(ros_args: Sequence[str], domain: int, stats_path: pathlib.Path,
     this process's environment set to the domain). Raises :class:`BenchError` when the node
     does not come up in ``startup_timeout`` s. The environment is restored afterwards.
     """
-    from mlofc_ros.demo import NodeProcess
-    command = [sys.executable, '-m', 'mlofc_ros.bench.ros', '--child', str(stats_path),
+    from mlofc_tools.demo import NodeProcess
+    command = [sys.executable, '-m', 'mlofc_tools.bench.ros', '--child', str(stats_path),
                '--ros-args', '-r', f'__node:={NODE_NAME}', '-r', f'image:={IMAGE_TOPIC}',
                '-r', f'camera_info:={INFO_TOPIC}', *ros_args]
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
@@ -487,7 +487,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
         params.PARAMS['queue_size'].default
     head = common.run_header(
         'ROS: the running node at rising image rates', common.command_line('ros', argv),
-        {'Node': f'separate process, `MlofcNode` via `python -m mlofc_ros.bench.ros --child` '
+        {'Node': f'separate process, `MlofcNode` via `python -m mlofc_tools.bench.ros --child` '
                  f'(stats dump), `num_bodies:={args.boxes + 1}`, `queue_size` {queue}, other '
                  f'parameters default; fresh ROS_DOMAIN_ID, localhost discovery; started in '
                  f'{res["startup"]:.1f} s',

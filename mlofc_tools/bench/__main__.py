@@ -11,7 +11,7 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Dispatch ``python -m mlofc_ros.bench NAME [options]`` to ``mlofc_ros.bench.NAME.main``."""
+"""Dispatch ``python -m mlofc_tools.bench NAME [options]`` to ``mlofc_tools.bench.NAME.main``."""
 import importlib
 import sys
 from typing import List, Optional
@@ -39,9 +39,9 @@ def run_all() -> int:
     """
     worst = 0
     for name in BENCHMARKS:
-        print(f'=== python -m mlofc_ros.bench {name}', file=sys.stderr, flush=True)
+        print(f'=== python -m mlofc_tools.bench {name}', file=sys.stderr, flush=True)
         try:
-            code = int(importlib.import_module(f'mlofc_ros.bench.{name}').main([]) or 0)
+            code = int(importlib.import_module(f'mlofc_tools.bench.{name}').main([]) or 0)
         except Exception as exc:  # noqa: B902 (report it and go on with the next one)
             print(f'=== {name} failed: {type(exc).__name__}: {exc}', file=sys.stderr)
             code = 1
@@ -52,7 +52,7 @@ def run_all() -> int:
 def main(argv: Optional[List[str]] = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ('-h', '--help'):
-        print('usage: python -m mlofc_ros.bench NAME [options]\n')
+        print('usage: python -m mlofc_tools.bench NAME [options]\n')
         for name, text in BENCHMARKS.items():
             print(f'  {name:10s} {text}')
         print(f'  {"all":10s} every benchmark above with its defaults (make bench)')
@@ -67,7 +67,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     if name not in BENCHMARKS:
         print(f'unknown benchmark {name!r}; choose from {sorted(BENCHMARKS)}', file=sys.stderr)
         return 2
-    module = importlib.import_module(f'mlofc_ros.bench.{name}')
+    module = importlib.import_module(f'mlofc_tools.bench.{name}')
     return int(module.main(argv) or 0)
 
 

@@ -27,10 +27,10 @@ import cv2
 import numpy as np
 
 from mlofc_ros.camera import as_camera, CameraLike, CameraModel
-from mlofc_ros.render.geometry import distort_pixels
-from mlofc_ros.render.raster import offset_polygons, SHIFT, to_fixed
-from mlofc_ros.render.scene import Body, make_background, place_boxes
-from mlofc_ros.render.truth import visible_segments
+from mlofc_tools.render.geometry import distort_pixels
+from mlofc_tools.render.raster import offset_polygons, SHIFT, to_fixed
+from mlofc_tools.render.scene import Body, make_background, place_boxes
+from mlofc_tools.render.truth import visible_segments
 
 MOTIONS = ('camera_centre', 'own_centre')
 

@@ -27,7 +27,7 @@ under ``--real-dir`` (``*/frames/*.png``; visp_cube's ``cube.xml`` gives its int
 others have none so the solver estimates the focal length). Statistics skip the first
 ``window`` frames (window filling). Writes ``pipeline.md`` and ``pipeline.png``.
 
-Run ``python -m mlofc_ros.bench pipeline``.
+Run ``python -m mlofc_tools.bench pipeline``.
 """
 import argparse
 import glob
@@ -42,8 +42,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 # importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
-from mlofc_ros.bench import common
-from mlofc_ros.bench.data import shared_data_dir
+from mlofc_tools.bench import common
+from mlofc_tools.datasets.shared import shared_data_dir
 
 REAL_DIR = os.environ.get('MLOFC_REAL_DIR', str(shared_data_dir() / 'real'))
 
@@ -108,7 +108,7 @@ def real_sequences(root: str, max_frames: int) -> List[Sequence_]:
 def rendered_sequences(sizes: Sequence[Tuple[int, int]], frames: int, boxes: int,
                        seed: int) -> List[Sequence_]:
     """Render boxes + background at each size (``camera_centre`` motion, noise 2)."""
-    from mlofc_ros.render import render_sequence
+    from mlofc_tools.render import render_sequence
     out = []
     for w, h in sizes:
         seq = render_sequence(boxes, frames, size=(w, h), motion='camera_centre',
@@ -255,7 +255,7 @@ def _split_row(r: Dict[str, np.ndarray]) -> List[object]:
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench pipeline',
+    ap = argparse.ArgumentParser(prog='python -m mlofc_tools.bench pipeline',
                                  description='Per-stage pipeline timings vs LSD alone.')
     ap.add_argument('--sizes', default='640x480,1280x720', help='rendered sizes, WxH,...')
     ap.add_argument('--frames', type=int, default=60, help='rendered frames per size (60)')

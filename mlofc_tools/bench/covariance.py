@@ -13,7 +13,7 @@
 # limitations under the License.
 """Is the published angular-velocity covariance honest? NEES on rendered scenes.
 
-Run ``python -m mlofc_ros.bench covariance``; writes ``docs/results/covariance.md``. The scenes
+Run ``python -m mlofc_tools.bench covariance``; writes ``docs/results/covariance.md``. The scenes
 of ``bench spinning`` go through :class:`~mlofc_ros.pipeline.Pipeline` (30 frames, every frame
 solved); for every moving box and scored frame the normalised estimation error squared
 
@@ -38,7 +38,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from mlofc_ros.bench import common, spinning
+from mlofc_tools.bench import common, spinning
 
 #: chi-square quantiles, 3 degrees of freedom: median and 95%.
 CHI2_3_MEDIAN, CHI2_3_95 = 2.366, 7.815
@@ -51,7 +51,7 @@ CONFIGS: Tuple[Tuple[str, str, str, int, bool], ...] = tuple(
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench covariance',
+    ap = argparse.ArgumentParser(prog='python -m mlofc_tools.bench covariance',
                                  description=__doc__.split('\n')[0])
     ap.add_argument('--seeds', default='0,1,2,3,4,5', help='render seeds')
     ap.add_argument('--frames', type=int, default=30)
@@ -95,7 +95,7 @@ def box_nees(seq, outs, first: int) -> List[Dict[str, float]]:
 def run_one(item: Tuple[Tuple[str, str, str, int, bool], int, int]) -> Dict[str, object]:
     """One configuration on one seed (module level: run in a worker process)."""
     (label, scene, method, window, scaled), seed, frames = item
-    from mlofc_ros.render import render_sequence
+    from mlofc_tools.render import render_sequence
     from mlofc_ros.solver import general
     motion, boxes, background = spinning.SCENES[scene]
     seq = render_sequence(n_boxes=boxes, n_frames=frames, size=(640, 480), motion=motion,

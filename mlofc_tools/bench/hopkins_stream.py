@@ -13,14 +13,14 @@
 # limitations under the License.
 """Hopkins155 line tracks streamed through `general`'s warm path, as the node solves them.
 
-``python -m mlofc_ros.bench hopkins_stream [--motions 3] [--sequences ...] [--variants ...]
+``python -m mlofc_tools.bench hopkins_stream [--motions 3] [--sequences ...] [--variants ...]
 [--out DIR]`` writes ``hopkins_stream.md`` to ``docs/results/`` (or ``--out``) and prints it
 (the 35 three-motion sequences by default, ~22 min on 2 cores).
 
 `bench hopkins` solves each K-frame window cold. A node sees the sequence as a stream: one
 window per frame, each warm-started from the previous window's labels and motions. Here the
 line tracks are built once, in the sequence's first frame
-(:func:`mlofc_ros.datasets.hopkins.line_tracks` with all frames, the same pairing rules as
+(:func:`mlofc_tools.datasets.hopkins.line_tracks` with all frames, the same pairing rules as
 `bench hopkins`), and go frame by frame through
 :meth:`mlofc_ros.pipeline.Pipeline.process_lines` (``method='general'``, ``window`` K = 5,
 the node's other defaults): the node's own solve path, body ids and all. The first frames,
@@ -47,10 +47,10 @@ import zlib
 
 import numpy as np
 
-from mlofc_ros.bench import common
-from mlofc_ros.bench.hopkins import (LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX, n_motions_of,
+from mlofc_tools.bench import common
+from mlofc_tools.bench.hopkins import (LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX, n_motions_of,
                                      pick_sequences, solver_state)
-from mlofc_ros.datasets import hopkins as hk
+from mlofc_tools.datasets import hopkins as hk
 
 #: Frames per window (`bench hopkins`'s K = 5).
 K = 5
@@ -166,8 +166,8 @@ def sequence_table(records: Sequence[Dict[str, object]]) -> str:
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    """Command-line options of ``python -m mlofc_ros.bench hopkins_stream``."""
-    p = argparse.ArgumentParser(prog='python -m mlofc_ros.bench hopkins_stream',
+    """Command-line options of ``python -m mlofc_tools.bench hopkins_stream``."""
+    p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench hopkins_stream',
                                 description=__doc__.split('\n')[0])
     p.add_argument('--sequences', default=None,
                    help='comma-separated sequence names (default all 155)')

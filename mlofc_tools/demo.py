@@ -11,7 +11,7 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""``python -m mlofc_ros.demo`` (``make demo``): the node, end to end, on a rendered bag.
+"""``python -m mlofc_tools.demo`` (``make demo``): the node, end to end, on a rendered bag.
 
 1. Render boxes rotating about the camera centre in front of a static striped wall (2 boxes +
    background = 3 bodies, 640x480, 60 frames at 30 Hz, known angular velocities and edges).
@@ -542,7 +542,7 @@ def summary_lines(seq: Any, ev: Evaluation, collected: Collected, cfg: DemoConfi
 def write_report(path: Path, lines: Sequence[str], cfg: DemoConfig, collected: Collected,
                  strip_name: str, argv: Sequence[str], total_time: float) -> None:
     """Write the Markdown summary of a run."""
-    cmd = ' '.join(['python -m mlofc_ros.demo', *argv])
+    cmd = ' '.join(['python -m mlofc_tools.demo', *argv])
     node_cmd = ' '.join(Path(collected.node_command[0]).name if i == 0 else a
                         for i, a in enumerate(collected.node_command))
     text = [
@@ -588,7 +588,7 @@ def _size(text: str) -> Tuple[int, int]:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog='python -m mlofc_ros.demo', description=__doc__.split(
+    p = argparse.ArgumentParser(prog='python -m mlofc_tools.demo', description=__doc__.split(
         '\n')[0].strip('`'), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--frames', type=int, default=60, help='frames to render (default 60)')
     p.add_argument('--boxes', type=int, default=2, help='moving boxes, 1..4 (default 2)')
@@ -622,7 +622,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         from mlofc_ros import params as mlofc_params
         from mlofc_ros.bag.bagfile import write_image_bag
-        from mlofc_ros.render import render_sequence
+        from mlofc_tools.render import render_sequence
 
         out_dir.mkdir(parents=True, exist_ok=True)
         print(f'rendering {cfg.frames} frames ({cfg.size[0]}x{cfg.size[1]}, {cfg.boxes} boxes '

@@ -23,7 +23,7 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from mlofc_ros.render.geometry import clip_segments_to_rect, distort_pixels
+from mlofc_tools.render.geometry import clip_segments_to_rect, distort_pixels
 
 #: Sample spacing along an edge, px (occlusion ends are accurate to about this).
 STEP_PX = 1.0

@@ -13,11 +13,11 @@
 # limitations under the License.
 """Spinning boxes through the whole pipeline: rotation-only ('robust') vs 'general'.
 
-Run ``python -m mlofc_ros.bench spinning``; writes ``docs/results/spinning.md`` and
+Run ``python -m mlofc_tools.bench spinning``; writes ``docs/results/spinning.md`` and
 ``spinning.png``. Rendered boxes spinning about their own centres (``own_centre``, so every
 box also translates relative to the camera) and, as a control, boxes rotating about the camera
 centre, go frame by frame through :class:`~mlofc_ros.pipeline.Pipeline`, exactly what the node
-runs (minus DDS). Scored on the frames with a full window, like ``python -m mlofc_ros.demo``:
+runs (minus DDS). Scored on the frames with a full window, like ``python -m mlofc_tools.demo``:
 
 - segments are matched to true edges (both endpoints within 3 px), the pipeline's stable body
   ids to true bodies by label overlap over the whole run;
@@ -48,7 +48,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from mlofc_ros.bench import common
+from mlofc_tools.bench import common
 
 #: Scenes: name -> (motion, boxes, background).
 SCENES = {
@@ -93,7 +93,7 @@ def score_run(seq, outs: Sequence[Tuple[object, float]], first: int) -> Dict[str
     ``static_deg_s`` (per body, |w| of static bodies), ``ms`` (CPU ms per scored frame) and
     ``mapping``.
     """
-    from mlofc_ros.demo import match_bodies, match_segments
+    from mlofc_tools.demo import match_bodies, match_segments
     n_gt = len(seq.body_names)
     labs, gts = [], []
     for f in range(first, len(outs)):
@@ -151,7 +151,7 @@ def score_run(seq, outs: Sequence[Tuple[object, float]], first: int) -> Dict[str
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog='python -m mlofc_ros.bench spinning',
+    p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench spinning',
                                 description=__doc__.split('\n')[0])
     p.add_argument('--scenes', default=','.join(SCENES),
                    help=f'comma-separated scenes from {list(SCENES)}')
@@ -264,7 +264,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
         common.command_line('spinning', argv),
         {'Code revision (mlofc_ros, at the start)': rev,
          'Sequences': f'{args.frames} frames 640x480 at 30 Hz, 60-150 deg/s per box, '
-                      'sensor noise 2 grey levels (mlofc_ros.render)',
+                      'sensor noise 2 grey levels (mlofc_tools.render)',
          'Run time': f'{seconds:.0f} s'})
     parts = [head, '', '## Over the seeds', '',
              common.markdown_table(SUMMARY_HEADERS, summary_rows(records)), '',
@@ -277,7 +277,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     import sys
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
-    from mlofc_ros.render import render_sequence
+    from mlofc_tools.render import render_sequence
     scenes = [s for s in args.scenes.split(',') if s]
     unknown = [s for s in scenes if s not in SCENES]
     if unknown:

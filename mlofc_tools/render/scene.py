@@ -26,7 +26,7 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from mlofc_ros.render.geometry import (clip_convex_polygon, random_rotation, so3_exp,
+from mlofc_tools.render.geometry import (clip_convex_polygon, random_rotation, so3_exp,
                                        so3_exp_many)
 
 #: Multipliers of a face's albedo: plain face, band of direction 1, direction 2, crossing.

@@ -11,13 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Datasets for benchmarks: real line tracks built from public point-track benchmarks.
+"""Tools around the mlofc_ros library: benchmarks, the renderer, synthetic scenes, datasets, the demo.
 
-- :mod:`mlofc_ros.datasets.hopkins`: Hopkins155 motion-segmentation point tracks, paired into
-  line tracks (two points of one rigid body span a 3D line of that body).
+The runtime package ``mlofc_ros`` never imports this one. It is run from a checkout
+(``python -m mlofc_tools.bench NAME``, ``python -m mlofc_tools.demo``) and is not installed.
 """
-from .hopkins import (DEFAULT_DATA_DIR, GROUPS, HopkinsSequence, line_tracks, list_sequences,
-                      load_sequence, pair_points, sequence_group)
-
-__all__ = ['DEFAULT_DATA_DIR', 'GROUPS', 'HopkinsSequence', 'line_tracks', 'list_sequences',
-           'load_sequence', 'pair_points', 'sequence_group']

@@ -11,11 +11,13 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Synthetic camera sequences of independently rotating striped boxes, with line ground truth.
+"""Datasets for benchmarks: real line tracks built from public point-track benchmarks.
 
-:func:`render_sequence` returns a :class:`RenderedSequence` (frames, stamps, camera, angular
-velocities and per-frame :class:`FrameTruth` of the visible straight edges).
+- :mod:`mlofc_tools.datasets.hopkins`: Hopkins155 motion-segmentation point tracks, paired into
+  line tracks (two points of one rigid body span a 3D line of that body).
 """
-from mlofc_ros.render.boxes import FrameTruth, render_sequence, RenderedSequence
+from .hopkins import (DEFAULT_DATA_DIR, GROUPS, HopkinsSequence, line_tracks, list_sequences,
+                      load_sequence, pair_points, sequence_group)
 
-__all__ = ['FrameTruth', 'RenderedSequence', 'render_sequence']
+__all__ = ['DEFAULT_DATA_DIR', 'GROUPS', 'HopkinsSequence', 'line_tracks', 'list_sequences',
+           'load_sequence', 'pair_points', 'sequence_group']

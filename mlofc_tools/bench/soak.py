@@ -20,7 +20,7 @@ is sampled at the start, every ``--every`` frames and at the end; the report (``
 rewritten at every sample, so an interrupted run still leaves its numbers. Memory is flat when
 the end RSS minus the RSS after the first block (allocator and caches warmed up) is small.
 
-Run ``python -m mlofc_ros.bench soak --frames 10000``.
+Run ``python -m mlofc_tools.bench soak --frames 10000``.
 """
 import argparse
 import math
@@ -32,7 +32,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 # importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
-from mlofc_ros.bench import common
+from mlofc_tools.bench import common
 
 
 def rss_mb(field: str = 'VmRSS') -> float:
@@ -51,7 +51,7 @@ def rss_mb(field: str = 'VmRSS') -> float:
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog='python -m mlofc_ros.bench soak',
+    ap = argparse.ArgumentParser(prog='python -m mlofc_tools.bench soak',
                                  description='Pipeline soak test: RSS over many frames.')
     ap.add_argument('--frames', type=int, default=10000, help='frames to process (10000)')
     ap.add_argument('--every', type=int, default=1000, help='RSS sample period, frames (1000)')
@@ -120,12 +120,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     argv = list(argv or [])
     args = parse_args(argv)
     args.load = os.getloadavg()[0]
-    from mlofc_ros.bench.pipeline import code_revisions
+    from mlofc_tools.bench.pipeline import code_revisions
     args.code = code_revisions()
     import cv2
     cv2.setNumThreads(1)
     from mlofc_ros.pipeline import Pipeline
-    from mlofc_ros.render import render_sequence
+    from mlofc_tools.render import render_sequence
 
     out = common.results_dir(args.out)
     common.eprint(f'soak: rendering {args.loop} frames {args.wh[0]}x{args.wh[1]}')
