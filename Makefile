@@ -27,7 +27,7 @@ bench: $(STAMP)
 	$(PY) -m mlofc_tools.bench all
 
 lint: $(STAMP)
-	$(PY) -m flake8 mlofc_ros mlofc_tools test
+	$(PY) -m pytest -q -m linter test
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

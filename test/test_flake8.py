@@ -12,26 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""ament_flake8, as `colcon test` runs it; plain flake8 with ament's config without ROS."""
-import pathlib
-import subprocess
-import sys
-
+from ament_flake8.main import main_with_errors
 import pytest
-
-ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.flake8
 @pytest.mark.linter
 def test_flake8():
-    try:
-        from ament_flake8.main import main_with_errors
-    except ImportError:
-        proc = subprocess.run(
-            [sys.executable, '-m', 'flake8', 'mlofc_ros', 'test', 'setup.py'],
-            cwd=ROOT, capture_output=True, text=True)
-        assert proc.returncode == 0, proc.stdout + proc.stderr
-        return
     rc, errors = main_with_errors(argv=[])
-    assert rc == 0, 'Found %d code style errors / warnings:\n' % len(errors) + '\n'.join(errors)
+    assert rc == 0, \
+        'Found %d code style errors / warnings:\n' % len(errors) + \
+        '\n'.join(errors)
