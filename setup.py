@@ -30,7 +30,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/docs', glob('docs/*.md')),
+        ('share/' + package_name + '/docs/design', glob('docs/design/*.md')),
     ],
     install_requires=['setuptools', 'numpy'],
     extras_require={
