@@ -33,7 +33,7 @@ KMAT = np.array([[F, 0, C], [0, F, C], [0, 0, 1.0]])
 
 
 def spinning_lines(n_lines=30, n_frames=5, seed=0, centre=(0.3, -0.2, 6.5), deg=4.0):
-    """Lines on a body spinning about its own centre: X' = R (X - C) + C."""
+    """Return tracks of lines on a body spinning about its own centre: X' = R (X - C) + C."""
     rng = np.random.default_rng(seed)
     axis = np.array([0.6, -0.7, 0.4]) / np.linalg.norm([0.6, -0.7, 0.4])
     w = np.deg2rad(deg) * axis
@@ -58,7 +58,7 @@ def pivot_translation(w, c):
 
 def small_spinning_body(seed, n_lines=25, n_frames=10, centre=(0.3, -0.2, 6.0), deg=3.0,
                         radius=0.4, noise=0.03):
-    """Lines within ``radius`` of ``centre`` turning about it (weak perspective), px noise."""
+    """Return noisy tracks of lines within ``radius`` of ``centre``, turning about it."""
     rng = np.random.default_rng(seed)
     axis = rng.normal(size=3)
     w = np.deg2rad(deg) * axis / np.linalg.norm(axis)
@@ -383,7 +383,7 @@ def test_position_costs_favour_compact_bodies():
 
 
 def cost_of(cost, lab):
-    """Sum of each track's cost under its label."""
+    """Return the sum of each track's cost under its label."""
     return float(cost[np.arange(lab.size), lab].sum())
 
 
