@@ -179,6 +179,7 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
     Parameters
     ----------
     obs : LineObservations
+        The window's line tracks.
     n : int
         Number of bodies.
     starts : list of (name, labels (N,))
@@ -188,6 +189,8 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         every body's first fit from (:func:`.fit_body_multistart`).
     sigma2 : float
         Endpoint noise variance (px^2), fixed.
+    outlier_p : float
+        Chi-square quantile of the outlier bound.
     neighbours : (N, k) int, optional
         Image neighbours for the spatial prior of :func:`.spatial.smooth_labels`.
     rounds, iterations : int
@@ -200,6 +203,8 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         Track midpoints (px): each body also gets an image-position term
         (:func:`position_costs`, times ``position_weight * sigma2``) in the assignment and the
         score, so that the starts are compared on motion AND compactness.
+    position_weight : float
+        Weight of the position term (:data:`POSITION_WEIGHT`).
 
     Returns
     -------
