@@ -212,6 +212,7 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
     translations per frame (camera frame; length = the scale of ``|T| / d``), ``costs (N, n)``
     (motion only), ``sigma2``, the winning ``start`` and its ``score`` (capped total cost,
     position terms included).
+
     """
     dof = np.maximum(2.0 * obs.frames - 2.0, 0.0)
     usable = obs.frames >= 3
@@ -267,6 +268,7 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
     Parameters
     ----------
     obs : LineObservations
+        The window's line tracks.
     n : int
         Number of bodies.
     starts : list of (name, labels (N,))
@@ -279,10 +281,20 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
         Rotation-only rotation vectors (rad/frame), the first fits' starts.
     neighbours : (N, k) int, optional
         Image neighbours for the spatial prior.
+    noise_factor : float
+        The marginalised model's noise variance over the measured one (:data:`NOISE_FACTOR`).
+    outlier_p : float
+        Chi-square quantile of the outlier bound.
     points : (N, 2) float, optional
         Track midpoints (px) for the bodies' position term (:func:`position_costs`).
+    position_weight : float
+        Weight of the position term (:data:`POSITION_WEIGHT`).
 
-    Returns the dict of :func:`marginal_segmentation`.
+    Returns
+    -------
+    dict
+        As :func:`marginal_segmentation`'s.
+
     """
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
     W, T = np.array(w_rot, dtype=float), np.zeros((n, 3))
@@ -308,6 +320,7 @@ def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: 
     Parameters
     ----------
     obs : LineObservations
+        The window's line tracks.
     labels : (N,) int
         Starting labels (the previous window's, ``-1`` unknown).
     W0, T0 : (n, 3)
@@ -318,9 +331,15 @@ def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: 
         multi-start search at ``W0`` (their rotation-only estimate).
     rounds, iterations : int
         Fit/assign rounds and LM iterations per body and round.
+    outlier_p : float
+        Chi-square quantile of the outlier bound.
 
-    Returns the dict of :func:`marginal_segmentation` (``start='warm'``, fitted directions,
-    unit ``T``) plus ``inliers``, the share of usable tracks within the outlier bound.
+    Returns
+    -------
+    dict
+        As :func:`marginal_segmentation`'s (``start='warm'``, fitted directions, unit ``T``)
+        plus ``inliers``, the share of usable tracks within the outlier bound.
+
     """
     n = W0.shape[0]
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
