@@ -1,0 +1,408 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+Line model of general rigid motion over three or more frames: rotation AND translation.
+
+A 3D line with Plucker moment ``n0`` and direction ``v0`` on a body moving ``X' = R X + T`` per
+frame has, in frame ``k``, the moment ``n_k = R^k n0 + T_k x R^k v0`` with
+``T_k = sum_{j<k} R^j T``; its image is the line with normal ``m_k ~ n_k``. For the two directions
+``e`` orthogonal to the observed ``m_k``, ``e . n_k = 0``, which is LINEAR in ``(n0, v0)``::
+
+    (R^-k e) . n0 + (R^-k (e x T_k)) . v0 = 0
+
+``v0`` is orthogonal to ``n0``: two unknowns per line (its direction within the plane and
+``1/d``; the scale of ``T`` is absorbed by ``v0``). Projecting them out leaves a 3x3 problem in
+``n0`` whose smallest eigenvalue is the line's (whitened) residual: ``2K - 4`` constraints per
+line, none with two frames (as it must be), six with five. With ``T = 0`` it reduces to the
+rotation-only model (:func:`line_residuals`).
+
+Fitting the two direction unknowns per line removes all first-order information (the
+translational flow spans the line's whole flow space), which leaves bodies nearly
+indistinguishable over a few frames; :func:`marginal_residuals` instead gives the direction a
+Gaussian prior scaled by the body's translation and integrates it out (docs/design.md).
+"""
+from typing import Optional, Tuple
+
+import numpy as np
+
+from .eigen import smallest_eigenpair, smallest_eigenpair_parts
+from ..lines import (first_midpoints, interpretation_normals, normalise_points, orthonormal_pair,
+                     rotation_matrix)
+
+
+Intrinsics = Tuple[float, float, float, float]
+
+
+class LineObservations:
+    """
+    Whitened observation directions of every track and frame.
+
+    ``rows (N, K, 2, 3)``: for each frame the two directions ``e`` orthogonal to ``m_k``, scaled
+    by the inverse standard deviation of ``m_k`` along them (1 px endpoint noise), so that
+    ``rows . n_k / |n_k|`` has unit variance; zero where the track is missing.
+    ``midpoints (N, 2)``: the midpoint of every track's first segment (px); ``rays (N, 3)``: the
+    unit viewing ray through it (camera frame).
+    """
+
+    def __init__(self, tracks: np.ndarray, intrinsics: Intrinsics) -> None:
+        self.intrinsics = tuple(float(x) for x in intrinsics)
+        m, cov = interpretation_normals(tracks, intrinsics)
+        ok = np.isfinite(m[..., 0])
+        m = np.where(ok[..., None], m, np.array([0.0, 0.0, 1.0]))
+        cov = np.where(ok[..., None, None], cov, np.eye(3))
+        E = orthonormal_pair(m)                                      # (N, K, 3, 2)
+        s = np.swapaxes(E, -1, -2) @ cov @ E                         # (N, K, 2, 2)
+        val, vec = np.linalg.eigh(s)
+        dirs = E @ vec                                               # principal directions
+        rows = np.swapaxes(dirs, -1, -2) / np.sqrt(np.maximum(val, 1e-30))[..., None]
+        self.rows = np.where(ok[..., None, None], rows, 0.0)
+        self.present = ok
+        self.m = m
+        first = np.argmax(ok, axis=1)
+        self.m_first = m[np.arange(m.shape[0]), first]
+        self.frames = ok.sum(axis=1)
+        self.midpoints = first_midpoints(tracks)
+        rays = normalise_points(self.midpoints, intrinsics)
+        self.rays = rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+    @property
+    def n_tracks(self) -> int:
+        """Return the number of tracks ``N``."""
+        return self.rows.shape[0]
+
+    def body_ray(self, idx: np.ndarray) -> np.ndarray:
+        """Return the unit ray ``(3,)`` towards the tracks ``idx`` (camera frame)."""
+        ray = self.rays[idx].sum(axis=0)
+        return ray / np.linalg.norm(ray)
+
+
+def _motion_terms(w: np.ndarray, t: np.ndarray, n_frames: int) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return ``R^k (..., K, 3, 3)`` and ``T_k (..., K, 3)`` of motions ``w, t (..., 3)``.
+
+    ``k = 0..K-1``. ``R^k`` is the rotation by ``k w`` (Rodrigues, one batched call rather than
+    ``K - 1`` sequential products) and ``T_k = sum_{j<k} R^j t``. Leading axes batch several
+    motions: each gets the same products as when alone.
+    """
+    k = np.arange(n_frames, dtype=float)
+    Rk = rotation_matrix(w[..., None, :] * k[:, None])
+    Tk = np.zeros(Rk.shape[:-1])
+    Tk[..., 1:, :] = np.cumsum((Rk[..., :-1, :, :] @ t[..., None, :, None])[..., 0], axis=-2)
+    return Rk, Tk
+
+
+def _design(rows: np.ndarray, w: np.ndarray, t: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return the linear constraints of tracks with whitened observation ``rows (L, K, 2, 3)``.
+
+    ``w, t (..., 3)``: one motion or a batch of them (leading axes ``...``). Returns
+    ``An (..., L, 2K, 3)`` acting on the moment ``n0`` and ``Av (..., L, 2K, 3)`` acting on the
+    direction ``v0``; both are independent of the basis of ``v0`` (:func:`_direction_columns`),
+    so a second pass at the same motion reuses them.
+    """
+    L, K = rows.shape[0], rows.shape[1]
+    Rk, Tk = _motion_terms(w, t, K)
+    lead = Rk.shape[:-3]
+    # (R^-k e) . n0 = e . R^k n0  ->  rows @ R^k ; e . (T_k x R^k v0) = (e x T_k) . R^k v0.
+    # Written out term by term, lines last: long contiguous inner loops over the lines instead
+    # of einsum's 3-long ones (3-5x faster on a batch), and the same products and sums in the
+    # same order as einsum('lkji,kim->lkjm') and np.cross, so bit for bit the same result.
+    rT = np.ascontiguousarray(np.moveaxis(rows, 0, -1))             # (K, 2, 3, L)
+    r = [np.ascontiguousarray(rT[:, :, i, None, :]) for i in range(3)]  # (K, 2, 1, L)
+    Rb = Rk[..., :, None, :, :, None]                                # (..., K, 1, 3, 3, 1)
+    Tb = Tk[..., :, None, :, None]                                   # (..., K, 1, 3, 1)
+    An = r[0] * Rb[..., 0, :, :] + r[1] * Rb[..., 1, :, :] + r[2] * Rb[..., 2, :, :]
+    ex = [r[1] * Tb[..., 2, None, :] - r[2] * Tb[..., 1, None, :],  # e x T_k
+          r[2] * Tb[..., 0, None, :] - r[0] * Tb[..., 2, None, :],
+          r[0] * Tb[..., 1, None, :] - r[1] * Tb[..., 0, None, :]]
+    Av = ex[0] * Rb[..., 0, :, :] + ex[1] * Rb[..., 1, :, :] + ex[2] * Rb[..., 2, :, :]
+    # (..., K, 2, 3, L) -> (..., L, 2K, 3), C-contiguous as einsum's output was: the matrix
+    # products downstream then take the same BLAS path per line (a strided operand would take
+    # numpy's own loop, whose rounding may differ)
+    An = np.ascontiguousarray(np.moveaxis(An, -1, -4)).reshape(lead + (L, 2 * K, 3))
+    Av = np.ascontiguousarray(np.moveaxis(Av, -1, -4)).reshape(lead + (L, 2 * K, 3))
+    return An, Av
+
+
+def _direction_columns(Av: np.ndarray, base: np.ndarray,
+                       basis: Optional[np.ndarray] = None) -> np.ndarray:
+    """
+    Return the direction columns ``Av`` in the plane orthogonal to ``base``, ``(..., L, 2K, 2)``.
+
+    ``base (..., L, 3)``; ``basis``: its :func:`.orthonormal_pair` if already computed.
+    """
+    return Av @ (orthonormal_pair(base) if basis is None else basis)
+
+
+def _smallest(P: np.ndarray, base: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return the smallest eigenvalue ``(..., L)`` of ``P^T P`` and its unit eigenvector.
+
+    ``P (..., L, R, 3)``; the eigenvector ``(..., L, 3)`` is signed like ``base (..., L, 3)``.
+    """
+    return _toward(*smallest_eigenpair(np.swapaxes(P, -1, -2) @ P), base)
+
+
+def _toward(val: np.ndarray, n0: np.ndarray, base: np.ndarray
+            ) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Clip eigenvalues ``(...)`` at 0 and sign unit eigenvectors ``n0 (..., 3)`` like ``base``.
+
+    ``n0`` is flipped in place where it points away from ``base``.
+    """
+    n0 *= np.where(np.sum(n0 * base, axis=-1) < 0, -1.0, 1.0)[..., None]
+    return np.maximum(val, 0.0), n0
+
+
+def _apply(P: np.ndarray, n0: np.ndarray) -> np.ndarray:
+    """
+    Return the residual vectors ``(..., L, R)`` of ``P (..., L, R, 3)`` at ``n0 (..., L, 3)``.
+
+    Summed term by term in a fixed order: the float result is then the same for every memory
+    layout and batch shape (einsum picks its summation kernel by the operands' strides), and
+    the same as einsum's with the strided moments the eigensolver returns.
+    """
+    n0 = n0[..., None, :]
+    return P[..., 0] * n0[..., 0] + P[..., 1] * n0[..., 1] + P[..., 2] * n0[..., 2]
+
+
+def _line_eval(An: np.ndarray, AvB: np.ndarray, base: np.ndarray,
+               fixed: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """Evaluate :func:`line_residuals` from the constraints ``An``, ``AvB`` (batched)."""
+    # orthonormal basis of the two columns (Gram-Schmidt, vectorised), then project them out
+    q1 = AvB[..., 0]
+    n1 = np.linalg.norm(q1, axis=-1, keepdims=True)
+    q1 = np.where(n1 > 1e-12, q1 / np.maximum(n1, 1e-300), 0.0)
+    q2 = AvB[..., 1] - q1 * np.sum(q1 * AvB[..., 1], axis=-1, keepdims=True)
+    n2 = np.linalg.norm(q2, axis=-1, keepdims=True)
+    q2 = np.where(n2 > 1e-12 * np.maximum(n1, 1.0), q2 / np.maximum(n2, 1e-300), 0.0)
+    P = An - q1[..., None] * np.einsum('...r,...rc->...c', q1, An)[..., None, :]
+    P = P - q2[..., None] * np.einsum('...r,...rc->...c', q2, P)[..., None, :]
+    if fixed is not None:
+        return _apply(P, fixed), fixed
+    return _smallest(P, base)
+
+
+#: Gram blocks of constraints (:func:`_grams`): ``{'nn', 'vn', 'vv'}`` -> 3 x 3 nested lists
+#: of arrays ``(..., L)``, the entries of ``An^T An``, ``Av^T An`` and ``Av^T Av``.
+Grams = dict
+
+
+def _grams(An: np.ndarray, Av: np.ndarray) -> Grams:
+    """
+    Return the :data:`Grams` of :func:`_design`'s output ``(..., L, 2K, 3)``.
+
+    They hold all that the marginalised cost needs of the ``2K x 3`` constraints, whatever the
+    basis of ``v0``: two passes at the same motion (:func:`_costs2`) share them.
+    """
+    AnT, AvT = np.swapaxes(An, -1, -2), np.swapaxes(Av, -1, -2)
+    out = {}
+    for key, g in (('nn', AnT @ An), ('vn', AvT @ An), ('vv', AvT @ Av)):
+        out[key] = [[g[..., i, j] for j in range(3)] for i in range(3)]
+    return out
+
+
+def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: float,
+                    basis: Optional[np.ndarray] = None, logdet_out: Optional[list] = None
+                    ) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return :func:`marginal_residuals`' costs ``(..., L)`` and moments ``(..., L, 3)``.
+
+    From the :data:`Grams` ``grams``.
+
+    With the whitened direction columns ``M = Av B / sqrt(sigma2)`` (``B`` the basis of the
+    plane orthogonal to ``base``, :func:`.orthonormal_pair` or ``basis``) and ``S = M^T M``
+    (2x2 per line), the cost's quadratic form is
+    ``An^T (I + M M^T)^-1 An = An^T An - G^T (I + S)^-1 G`` with ``G = M^T An`` (Woodbury),
+    and the log-determinant ``log det(I + S)``: no ``2K x 3`` products, a few 3x3 and 2x2
+    ones per line, written out element-wise over the batch (stacked 3x3 matrix products cost
+    several times more at the solver's batch sizes).
+    """
+    B = orthonormal_pair(base) if basis is None else basis          # (..., L, 3, 2)
+    b = [[B[..., i, c] for i in range(3)] for c in range(2)]        # b[c][i]: column c
+    nn, vn, vv = grams['nn'], grams['vn'], grams['vv']
+    # Av^T Av B and B^T Av^T An, column by column
+    vvb = [[vv[i][0] * b[c][0] + vv[i][1] * b[c][1] + vv[i][2] * b[c][2] for i in range(3)]
+           for c in range(2)]
+    S = [[(b[c][0] * vvb[e][0] + b[c][1] * vvb[e][1] + b[c][2] * vvb[e][2]) / sigma2
+          for e in range(2)] for c in range(2)]
+    root = 1.0 / np.sqrt(sigma2)
+    G = [[(b[c][0] * vn[0][j] + b[c][1] * vn[1][j] + b[c][2] * vn[2][j]) * root
+          for j in range(3)] for c in range(2)]
+    s00, s01, s11 = 1.0 + S[0][0], 0.5 * (S[0][1] + S[1][0]), 1.0 + S[1][1]
+    # det(I + S) >= 1 (rounding could take it below, then its log's root would be NaN)
+    det = np.maximum(s00 * s11 - s01 * s01, 1.0)
+    logdet = sigma2 * np.log(det)
+    if logdet_out is not None:
+        logdet_out.append(logdet)
+    # X = (I + S)^-1 G, the 2x2 inverse written out; C = An^T An - G^T X
+    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+    X = [[i00 * G[0][j] + i01 * G[1][j] for j in range(3)],
+         [i01 * G[0][j] + i11 * G[1][j] for j in range(3)]]
+    C = {(i, j): nn[i][j] - G[0][i] * X[0][j] - G[1][i] * X[1][j]
+         for i in range(3) for j in range(i, 3)}
+    val, n0 = smallest_eigenpair_parts(C[0, 0], C[0, 1], C[0, 2], C[1, 1], C[1, 2], C[2, 2])
+    val, n0 = _toward(val, n0, base)
+    return val + logdet, n0
+
+
+def _marginal_vectors(An: np.ndarray, M: np.ndarray, fixed: np.ndarray, sigma2: float,
+                      logdet_out: Optional[list] = None) -> np.ndarray:
+    """
+    Return :func:`marginal_residuals`' residual vectors ``(..., L, 2K + 1)`` at ``fixed``.
+
+    ``fixed (..., L, 3)``: the moments.
+
+    ``An``, ``M``: the constraints and direction columns (:func:`_design`,
+    :func:`_direction_columns`). The vector is ``(I + M M^T)^-1/2 An n0`` (``M`` whitened)
+    and the root of the log-determinant. ``(I + M M^T)^-1/2 = I - M H M^T`` with
+    ``H = V diag(g) V^T`` for ``S = M^T M = V diag(s) V^T`` and
+    ``g = (1 - 1/q) / s = 1 / (q (1 + q))``, ``q = sqrt(1 + s)``; with the eigenvalues
+    ``lo <= hi`` of ``S`` in closed form and ``u`` its top unit eigenvector,
+    ``H = g_lo I + (g_hi - g_lo) u u^T``, ``u u^T = (I + [[c, t], [t, -c]]) / 2`` where
+    ``(c, t) = (S00 - S11, 2 S01) / (2 d)``.
+    """
+    M = M / np.sqrt(sigma2)
+    m0, m1 = M[..., 0], M[..., 1]
+    a, b, c = np.sum(m0 * m0, axis=-1), np.sum(m0 * m1, axis=-1), np.sum(m1 * m1, axis=-1)
+    logdet = sigma2 * np.log(np.maximum((1.0 + a) * (1.0 + c) - b * b, 1.0))   # det(I + S)
+    if logdet_out is not None:
+        logdet_out.append(logdet)
+    half, mid = 0.5 * (a - c), 0.5 * (a + c)
+    d = np.hypot(half, b)
+    q_lo, q_hi = np.sqrt(1.0 + np.maximum(mid - d, 0.0)), np.sqrt(1.0 + mid + d)
+    g_lo, g_hi = 1.0 / (q_lo * (1.0 + q_lo)), 1.0 / (q_hi * (1.0 + q_hi))
+    g_mid = 0.5 * (g_lo + g_hi)
+    g_off = 0.5 * (g_hi - g_lo) / np.where(d > 0.0, d, 1.0)
+    r = _apply(An, fixed)                                           # (..., L, R)
+    t0, t1 = np.sum(m0 * r, axis=-1), np.sum(m1 * r, axis=-1)       # M^T r
+    u0 = (g_mid + g_off * half) * t0 + g_off * b * t1               # H M^T r
+    u1 = g_off * b * t0 + (g_mid - g_off * half) * t1
+    r = r - m0 * u0[..., None] - m1 * u1[..., None]
+    return np.concatenate([r, np.sqrt(logdet)[..., None]], axis=-1)
+
+
+def _evaluate(An: np.ndarray, Av: np.ndarray, base: np.ndarray, sigma2: Optional[float],
+              fixed: Optional[np.ndarray] = None, basis: Optional[np.ndarray] = None,
+              logdet_out: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return costs and moments (or residual vectors at ``fixed``) from :func:`_design`'s output.
+
+    ``sigma2`` None: :func:`line_residuals`, else :func:`marginal_residuals`; every array may
+    carry leading batch axes.
+    """
+    if sigma2 is not None and fixed is None:
+        return _marginal_costs(_grams(An, Av), base, sigma2, basis, logdet_out)
+    M = _direction_columns(Av, base, basis)
+    if sigma2 is None:
+        return _line_eval(An, M, base, fixed)
+    return _marginal_vectors(An, M, fixed, sigma2, logdet_out), fixed
+
+
+def line_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
+                   n0: Optional[np.ndarray] = None, fixed: Optional[np.ndarray] = None
+                   ) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return the whitened residual ``(L,)`` (sum of squares) and moment direction ``n0 (L, 3)``.
+
+    ``idx``: tracks to evaluate; ``n0``: current moment estimates, whose orthogonal plane
+    holds ``v0`` (defaults to the first observed normal). With ``fixed (L, 3)`` the moments are
+    not re-solved: the projected residual VECTORS ``(L, 2K)`` at those moments are returned
+    instead of the minimal costs (for Gauss-Newton by variable projection).
+    """
+    base = obs.m_first[idx] if n0 is None else n0
+    An, Av = _design(obs.rows[idx], w, t)
+    return _evaluate(An, Av, base, None, fixed)
+
+
+def marginal_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
+                       sigma2: float, n0: Optional[np.ndarray] = None,
+                       fixed: Optional[np.ndarray] = None, logdet_out: Optional[list] = None
+                       ) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return the cost ``(L,)`` with each line's direction MARGINALISED, not fitted (1 px units).
+
+    The direction ``v0`` (two unknowns per line, in the plane orthogonal to ``n0``) is given
+    the prior ``N(0, I)`` and integrated out, with ``t`` (3,) a translation per frame whose
+    length is the body's scale of ``|T| / d`` (``d`` the line's distance to the camera centre,
+    rad per frame). The residuals are then Gaussian with covariance ``sigma2 I + M M^T``
+    (``M`` the whitened direction columns), and the cost is ``sigma2`` times its negative
+    log-likelihood (up to a constant)::
+
+        r^T (I + M M^T / sigma2)^-1 r + sigma2 log det(I + M^T M / sigma2),  r = An n0
+
+    minimised over the unit moment ``n0`` (a 3x3 eigenproblem, as in :func:`line_residuals`).
+    ``t = 0`` is the rotation-only model; ``|t| -> inf`` tends to the fitted-direction model of
+    :func:`line_residuals` plus a log-determinant. Unlike that model, a line's first-order
+    flow still counts: a body explains large per-line translational flows only at the price
+    of a large ``|t|``, paid by every line through the log-determinant.
+
+    ``sigma2``: endpoint noise variance (px^2). With ``fixed (L, 3)`` returns residual VECTORS
+    ``(L, 2K + 1)`` whose squares sum to the cost at those moments (for Gauss-Newton).
+    ``logdet_out``: a list that receives the log-determinant term ``(L,)`` (included in the
+    cost).
+    """
+    base = obs.m_first[idx] if n0 is None else n0
+    An, Av = _design(obs.rows[idx], w, t)
+    return _evaluate(An, Av, base, sigma2, fixed, logdet_out=logdet_out)
+
+
+def _costs2(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
+            sigma2: Optional[float], basis: Optional[np.ndarray] = None,
+            logdet_out: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return costs ``(..., L)`` and moments after two passes (the v0 plane follows the moment).
+
+    ``rows (L, K, 2, 3)``: the tracks' observation rows; ``w, t (..., 3)`` one motion or a
+    batch; ``base (L, 3)`` or ``(..., L, 3)`` the first pass's moments, ``basis`` their
+    :func:`.orthonormal_pair` if known. Both passes share the motion's constraints.
+    ``logdet_out``: a list that receives the second pass's log-determinant terms (marginalised).
+    """
+    if sigma2 is None:
+        An, Av = _design(rows, w, t)
+        _, n0 = _evaluate(An, Av, base, None, basis=basis)
+        return _evaluate(An, Av, n0, None)
+    grams = _grams(*_design(rows, w, t))
+    _, n0 = _marginal_costs(grams, base, sigma2, basis)
+    return _marginal_costs(grams, n0, sigma2, logdet_out=logdet_out)
+
+
+def general_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray,
+                  sigma2: Optional[float] = None) -> np.ndarray:
+    """
+    Return the cost ``(N, n)`` of every track under every body ``(W (n, 3), T (n, 3))``.
+
+    ``sigma2`` None: fitted line directions (:func:`line_residuals`, unit T); else
+    marginalised (:func:`marginal_residuals`, T with its scale, ``sigma2`` px^2).
+    ``nan`` for tracks with fewer than 3 frames (no constraint on a general motion).
+    """
+    # all bodies in one batch
+    out = np.ascontiguousarray(_costs2(obs.rows, obs.m_first, W, T, sigma2)[0].T)
+    out[obs.frames < 3] = np.nan
+    return out
+
+
+def marginal_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray, sigma2: float
+                   ) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return marginalised costs ``(N, n)`` and their log-determinant parts ``(N, n)`` (px^2).
+
+    See :func:`marginal_residuals`; ``nan`` for tracks with fewer than 3 frames.
+    """
+    An, Av = _design(obs.rows, W, T)                     # all bodies in one batch
+    _, n0 = _evaluate(An, Av, obs.m_first, sigma2)
+    parts: list = []
+    out = np.ascontiguousarray(_evaluate(An, Av, n0, sigma2, logdet_out=parts)[0].T)
+    out[obs.frames < 3] = np.nan
+    return out, np.ascontiguousarray(parts[0].T)

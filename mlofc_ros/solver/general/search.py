@@ -1,0 +1,364 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+Segmentation search of the 'general' method: lines to bodies with rotation AND translation.
+
+Fitted line directions (:func:`.line_residuals`) leave bodies nearly indistinguishable over
+a few frames, so the labels come from the marginalised model (:func:`.marginal_residuals`):
+:func:`general_search` measures the noise level and runs :func:`marginal_segmentation` from
+several labellings; :func:`general_warm` tracks the previous window's bodies instead. Each
+body is also a Gaussian blob in the image (:func:`position_costs`): over a few frames two
+objects may move alike, and the motion costs alone then prefer merging them and splitting a
+third body.
+"""
+from typing import Optional, Tuple
+
+import numpy as np
+
+from .fit import _best_fit
+from .model import general_costs, LineObservations, marginal_costs
+from .starts import fit_body_multistart
+from ..ksubspaces import assign, total_cost
+from ..models import chi2_quantile
+from ..spatial import smooth_labels
+
+
+def spatial_labels(mid: np.ndarray, n: int, rng: np.random.Generator,
+                   iterations: int = 10) -> np.ndarray:
+    """Cluster the track midpoints ``mid (N, 2)`` (px) by K-means: near lines share a body."""
+    centres = mid[rng.choice(mid.shape[0], n, replace=False)]
+    labels = np.zeros(mid.shape[0], dtype=np.int64)
+    for _ in range(iterations):
+        labels = np.argmin(np.linalg.norm(mid[:, None] - centres[None], axis=2), axis=1)
+        for b in range(n):
+            if np.any(labels == b):
+                centres[b] = mid[labels == b].mean(axis=0)
+    return labels
+
+
+#: Smallest endpoint noise assumed (px): the non-linear fits converge to ~1e-9, not to zero,
+#: and no detector locates lines better than this.
+SIGMA_FLOOR_PX = 0.1
+
+
+def _best_costs(costs: np.ndarray) -> np.ndarray:
+    """Return the smallest cost ``(N,)`` of every track over the bodies (``inf``: none)."""
+    if costs.shape[1] == 0:
+        return np.full(costs.shape[0], np.inf)
+    return np.min(np.where(np.isfinite(costs), costs, np.inf), axis=1)
+
+
+def _robust_sigma2(best: np.ndarray, dof: np.ndarray) -> float:
+    """Return the noise variance (1 px units) from the median of chi-square-normalised costs."""
+    ok = np.isfinite(best) & (dof > 0)
+    if not np.any(ok):
+        return 1.0
+    return float(max(np.median(best[ok] / chi2_quantile(0.5, dof[ok])), SIGMA_FLOOR_PX ** 2))
+
+
+def _assign_within_bound(costs: np.ndarray, dof: np.ndarray, outlier_p: float
+                         ) -> Tuple[float, np.ndarray, np.ndarray]:
+    """Return noise level, chi-square outlier bound ``(N,)`` and labels (``-1``: above it)."""
+    sigma2 = _robust_sigma2(_best_costs(costs), dof)
+    cap = chi2_quantile(outlier_p, dof) * sigma2
+    return sigma2, cap, assign(costs, cap)
+
+
+def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
+                   fitted: np.ndarray, iterations: int, w_start,
+                   sigma2: Optional[float] = None, t_start=None, keep: int = 3,
+                   first_iterations: int = 15, pivots: bool = True) -> None:
+    """
+    Refit every body with >= 3 tracks in place: LM from its motion, or multi-start.
+
+    ``fitted (n,)`` marks bodies whose ``(W, T)`` is a fit already (LM for ``iterations``);
+    the others start a multi-start search at ``w_start(b)`` (and ``t_start(b)``), with
+    :func:`.pivot_starts` towards the body's lines when ``pivots`` and a Necker check
+    (:func:`.fit_body_multistart`), and become fitted (``keep`` LM runs of
+    ``first_iterations``). ``sigma2``: marginalised directions (:func:`.marginal_residuals`).
+    """
+    for b in range(W.shape[0]):                               # bodies, not lines
+        idx = np.flatnonzero(labels == b)
+        if idx.size < 3:
+            continue
+        if fitted[b]:
+            W[b], T[b], _ = _best_fit(obs, idx, W[b], np.atleast_2d(T[b]), iterations, sigma2)
+        else:
+            W[b], T[b], _ = fit_body_multistart(
+                obs, idx, w_start(b), None if t_start is None else t_start(b),
+                first_iterations, keep, sigma2, obs.body_ray(idx), pivots)
+            fitted[b] = True
+
+
+def _assign_marginal(costs: np.ndarray, logdet: np.ndarray, dof: np.ndarray, sigma2: float,
+                     outlier_p: float, neighbours: Optional[np.ndarray] = None
+                     ) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return labels ``(N,)`` and outlier caps ``(N,)`` of marginalised costs.
+
+    A track is an outlier (``-1``) when, under its cheapest body, the quadratic part of its
+    cost (without the log-determinant, and without any position term of
+    :func:`position_costs` already added to ``costs`` and ``logdet``) is above the chi-square
+    bound with ``dof`` degrees of freedom; the cap is that bound plus those terms. With
+    ``neighbours`` the inliers are relabelled by :func:`.spatial.smooth_labels`.
+    """
+    lab = assign(costs)
+    ok = lab >= 0
+    ld = np.zeros(costs.shape[0])
+    ld[ok] = logdet[np.flatnonzero(ok), lab[ok]]
+    cap = chi2_quantile(outlier_p, dof) * sigma2 + ld
+    lab = assign(costs, cap)
+    if neighbours is not None:
+        lab, _ = smooth_labels(costs, lab, neighbours)
+    return lab, cap
+
+
+#: Weight of the bodies' image-position term (:func:`position_costs`) in the 'general'
+#: segmentation, relative to the motion costs (1 = the joint likelihood of positions and
+#: motion at the segmentation's inflated noise level). Measured on bench hopkins, K = 5:
+#: 8 three-motion checkerboard windows 24.5% misclassified (0), 19.3% (0.1), 13.6% (0.25),
+#: 9.5% (0.5), 8.3% (1); 24 windows of 20 random two-motion sequences 3.7% (0), 3.2% (0.25),
+#: 3.5% (0.5), 4.6% (1): a compact object pulls in the lines of a broad background near it.
+POSITION_WEIGHT = 0.5
+
+
+#: Pseudo-count of the shrinkage of a body's midpoint covariance towards all tracks' (tracks).
+POSITION_PRIOR = 3.0
+
+
+def position_costs(points: np.ndarray, labels: np.ndarray, n: int,
+                   prior: float = POSITION_PRIOR) -> np.ndarray:
+    """
+    Return the image-position cost ``(N, n)`` of every track under every body's Gaussian blob.
+
+    ``points (N, 2)``: the tracks' midpoints (px); ``labels (N,)`` the current bodies (``-1``
+    none). Each body is a 2D Gaussian over the image fitted to its tracks' midpoints, its
+    covariance shrunk towards that of all labelled tracks with ``prior`` pseudo-tracks (a body
+    with few or no tracks falls back to it); the cost is twice the negative log-likelihood,
+    ``d^T S^-1 d + log det S`` (scale-free: differences do not depend on the image size).
+    Rigid bodies are compact in the image: a body made of two distant regions (two objects
+    with nearly the same motion over the window) or lines far from a body's others pay for it.
+    """
+    pts = np.asarray(points, dtype=float)
+    ok = labels >= 0
+    ref = pts[ok] if np.count_nonzero(ok) >= 3 else pts
+    S0 = np.cov(ref.T) + 1e-6 * np.eye(2)
+    mu0 = ref.mean(axis=0)
+    out = np.empty((pts.shape[0], n))
+    for b in range(n):                                   # bodies, not lines
+        p = pts[labels == b]
+        mu = (p.sum(axis=0) + prior * mu0) / (p.shape[0] + prior)
+        d = p - mu
+        S = (d.T @ d + prior * (S0 + np.outer(mu0 - mu, mu0 - mu))) / (p.shape[0] + prior)
+        r = pts - mu
+        out[:, b] = (np.sum((r @ np.linalg.inv(S)) * r, axis=1)
+                     + np.log(np.linalg.det(S)))
+    return out
+
+
+def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.ndarray,
+                          T0: np.ndarray, sigma2: float, rounds: int = 8, iterations: int = 5,
+                          outlier_p: float = 0.9999, neighbours: Optional[np.ndarray] = None,
+                          keep: int = 3, first_iterations: int = 15,
+                          pivots: bool = True, points: Optional[np.ndarray] = None,
+                          position_weight: float = POSITION_WEIGHT) -> dict:
+    """
+    Segment with the marginalised-direction model (:func:`.marginal_residuals`).
+
+    Parameters
+    ----------
+    obs : LineObservations
+        The window's line tracks.
+    n : int
+        Number of bodies.
+    starts : list of (name, labels (N,))
+        Initial labellings.
+    W0, T0 : (n, 3)
+        Rotation (rad/frame) and translation (direction; its length is rescanned) to start
+        every body's first fit from (:func:`.fit_body_multistart`).
+    sigma2 : float
+        Endpoint noise variance (px^2), fixed.
+    outlier_p : float
+        Chi-square quantile of the outlier bound.
+    neighbours : (N, k) int, optional
+        Image neighbours for the spatial prior of :func:`.spatial.smooth_labels`.
+    rounds, iterations : int
+        Fit/assign rounds and LM iterations per body and round.
+    keep, first_iterations : int
+        LM runs (the best starts of the scan) and their iterations for a body's first fit.
+    pivots : bool
+        Whether a body's first fit also starts from :func:`.pivot_starts`.
+    points : (N, 2) float, optional
+        Track midpoints (px): each body also gets an image-position term
+        (:func:`position_costs`, times ``position_weight * sigma2``) in the assignment and the
+        score, so that the starts are compared on motion AND compactness.
+    position_weight : float
+        Weight of the position term (:data:`POSITION_WEIGHT`).
+
+    Returns
+    -------
+    dict with ``labels (N,)``, ``W (n, 3)`` rotation vectors (rad/frame), ``T (n, 3)``
+    translations per frame (camera frame; length = the scale of ``|T| / d``), ``costs (N, n)``
+    (motion only), ``sigma2``, the winning ``start`` and its ``score`` (capped total cost,
+    position terms included).
+
+    """
+    dof = np.maximum(2.0 * obs.frames - 2.0, 0.0)
+    usable = obs.frames >= 3
+    best = None
+    for name, lab in starts:
+        lab = np.where(usable, np.asarray(lab, dtype=np.int64), -1)
+        W, T = np.array(W0, dtype=float), np.array(T0, dtype=float)
+        fitted = np.zeros(n, dtype=bool)
+        costs = np.full((obs.n_tracks, n), np.nan)
+        cap = np.full(obs.n_tracks, np.inf)
+        total = costs
+        for _ in range(rounds):
+            _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b], sigma2,
+                           lambda b: T[b], keep, first_iterations, pivots)
+            costs, logdet = marginal_costs(obs, W, T, sigma2)
+            total = costs
+            if points is not None:
+                # the blobs of the labels the bodies were just fitted to; the position term
+                # is no evidence of an outlier, so it joins the log-determinant in the cap
+                extra = position_weight * sigma2 * position_costs(points, lab, n)
+                total, logdet = costs + extra, logdet + extra
+            new, cap = _assign_marginal(total, logdet, dof, sigma2, outlier_p, neighbours)
+            if np.array_equal(new, lab):
+                break
+            lab = new
+        score = total_cost(total, lab, cap)
+        if best is None or score < best['score']:
+            best = {'labels': lab, 'W': W.copy(), 'T': T.copy(), 'costs': costs,
+                    'sigma2': sigma2, 'start': name, 'score': score}
+    return best
+
+
+#: The marginalised model's noise variance, as a multiple of the noise variance of the
+#: fitted-direction model on the rotation-only labels. That estimate is the median of costs
+#: from which two unknowns per line and the best of n bodies were fitted away, and it ignores
+#: model error (non-constant velocity, lens): taken as it is, a body's translation scale grows
+#: until it explains other bodies' lines. Measured on bench hopkins, K = 5, one window of 16
+#: sequences: misclassified 30% (x1), 20% (x2), 16% (x4), 7% (x8); 32 sequences: 5.9% (x16),
+#: 7.4% (x64), 7.5% (x1000, nearly rotation-only); robust 20.3%, robust with -1 -> cheapest
+#: body 11.1%. With a T = 0 start in every body fit, the 35 three-motion sequences, K = 5,
+#: both windows: 12.2% (x8), 11.2% (x16), 12.2% (x32).
+NOISE_FACTOR = 16.0
+
+
+def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.ndarray,
+                   w_rot: np.ndarray, neighbours: Optional[np.ndarray] = None,
+                   noise_factor: float = NOISE_FACTOR, outlier_p: float = 0.9999,
+                   points: Optional[np.ndarray] = None,
+                   position_weight: float = POSITION_WEIGHT) -> dict:
+    """
+    Search the 'general' method's labels: noise level, then :func:`marginal_segmentation`.
+
+    Parameters
+    ----------
+    obs : LineObservations
+        The window's line tracks.
+    n : int
+        Number of bodies.
+    starts : list of (name, labels (N,))
+        Initial labellings (the rotation-only solution, a spatial clustering, ...).
+    rot_labels : (N,) int
+        The rotation-only labels: each body is first fitted on them with fitted line
+        directions (multi-start over T), which gives the noise level (times
+        ``noise_factor``) and the starting motions.
+    w_rot : (n, 3)
+        Rotation-only rotation vectors (rad/frame), the first fits' starts.
+    neighbours : (N, k) int, optional
+        Image neighbours for the spatial prior.
+    noise_factor : float
+        The marginalised model's noise variance over the measured one (:data:`NOISE_FACTOR`).
+    outlier_p : float
+        Chi-square quantile of the outlier bound.
+    points : (N, 2) float, optional
+        Track midpoints (px) for the bodies' position term (:func:`position_costs`).
+    position_weight : float
+        Weight of the position term (:data:`POSITION_WEIGHT`).
+
+    Returns
+    -------
+    dict
+        As :func:`marginal_segmentation`'s.
+
+    """
+    dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
+    W, T = np.array(w_rot, dtype=float), np.zeros((n, 3))
+    lab = np.where(dof > 0, np.asarray(rot_labels, dtype=np.int64), -1)
+    _fit_each_body(obs, lab, W, T, np.zeros(n, dtype=bool), 6, lambda b: w_rot[b])
+    sigma2 = noise_factor * _robust_sigma2(_best_costs(general_costs(obs, W, T)), dof)
+    return marginal_segmentation(obs, n, starts, W, T, sigma2, outlier_p=outlier_p,
+                                 neighbours=neighbours, points=points,
+                                 position_weight=position_weight)
+
+
+#: A warm start is kept when at least this share of the usable tracks stay inliers (else the
+#: full multi-start search runs).
+WARM_INLIERS = 0.5
+
+
+def general_warm(obs: LineObservations, labels: np.ndarray, W0: np.ndarray, T0: np.ndarray,
+                 known: np.ndarray, rounds: int = 3, iterations: int = 4,
+                 outlier_p: float = 0.9999) -> dict:
+    """
+    Track the bodies of the previous window: a few LM steps from its motions, then assign.
+
+    Parameters
+    ----------
+    obs : LineObservations
+        The window's line tracks.
+    labels : (N,) int
+        Starting labels (the previous window's, ``-1`` unknown).
+    W0, T0 : (n, 3)
+        Starting rotation vectors (rad/frame) and translation directions (unit or zero) per
+        body, camera optical frame.
+    known : (n,) bool
+        Bodies whose ``(W0, T0)`` come from a previous fit; the others start from the
+        multi-start search at ``W0`` (their rotation-only estimate).
+    rounds, iterations : int
+        Fit/assign rounds and LM iterations per body and round.
+    outlier_p : float
+        Chi-square quantile of the outlier bound.
+
+    Returns
+    -------
+    dict
+        As :func:`marginal_segmentation`'s (``start='warm'``, fitted directions, unit ``T``)
+        plus ``inliers``, the share of usable tracks within the outlier bound.
+
+    """
+    n = W0.shape[0]
+    dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
+    usable = dof > 0
+    lab = np.where(usable, np.asarray(labels, dtype=np.int64), -1)
+    W, T = np.array(W0, dtype=float), np.array(T0, dtype=float)
+    fitted = np.asarray(known, dtype=bool).copy()
+    costs = np.full((obs.n_tracks, n), np.nan)
+    sigma2, cap = 1.0, None
+    for _ in range(rounds):
+        _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b])
+        costs = general_costs(obs, W, T)
+        if not np.any(np.isfinite(costs)):
+            break
+        sigma2, cap, new = _assign_within_bound(costs, dof, outlier_p)
+        if np.array_equal(new, lab):
+            break
+        lab = new
+    inliers = float(np.mean(lab[usable] >= 0)) if np.any(usable) else 0.0
+    score = total_cost(costs, lab, cap) if cap is not None else np.inf
+    return {'labels': lab, 'W': W, 'T': T, 'costs': costs, 'sigma2': sigma2, 'start': 'warm',
+            'score': score, 'inliers': inliers}
