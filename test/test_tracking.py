@@ -206,7 +206,7 @@ def test_crowded_parallel_births_wait_but_not_on_the_first_frame():
         def detect(gray):
             calls.append(1)
             return np.zeros((0, 4), np.float32) if first_empty and len(calls) == 1 else pair
-        det = LineDetector(backend=detect, merge=False, orient=False)
+        det = LineDetector(backend=detect)
         return LineTracker(detector=det, birth_clear_px=clear, detect_every=1)
 
     tr = tracker(3.0, first_empty=True)

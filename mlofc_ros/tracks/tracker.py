@@ -49,7 +49,8 @@ from typing import Dict, NamedTuple, Optional, Tuple, Union
 import cv2
 import numpy as np
 
-from mlofc_ros.segments.detect import _angle_pairs, _square, check_gray, LineDetector
+from mlofc_ros.segments.common import angle_pairs, check_gray, square_kernel
+from mlofc_ros.segments.detect import LineDetector
 
 
 def _tls_by_group(px: np.ndarray, py: np.ndarray, w: np.ndarray, g: np.ndarray, k: int,
@@ -336,7 +337,7 @@ def _parallel_pairs(seg: np.ndarray, angle_deg: float
     length = np.maximum(np.hypot(x2 - x1, y2 - y1), 1e-9)
     ux, uy = (x2 - x1) / length, (y2 - y1) / length
     theta = np.mod(np.arctan2(uy, ux), np.pi)
-    i, j = _angle_pairs(theta, np.full(seg.shape[0], np.deg2rad(angle_deg)), np.pi)
+    i, j = angle_pairs(theta, np.full(seg.shape[0], np.deg2rad(angle_deg)), np.pi)
     lines = _Lines(x1, y1, x2, y2, length, ux, uy, 0.5 * (x1 + x2), 0.5 * (y1 + y2))
     return i, j, lines
 
@@ -949,7 +950,7 @@ class LineTracker:
             cv2.polylines(mask, list(pts[~carried]), False, 255, 5)
         r = int(round(self.region_margin_px * self.klt_scale))
         if r > 0:
-            mask = cv2.dilate(mask, _square(2 * r + 1))
+            mask = cv2.dilate(mask, square_kernel(2 * r + 1))
         h, w = self._shape
         ts = max(int(round(self.region_tile_px * self.klt_scale)), 1)   # KLT-image pixels
         nty, ntx = -(-mask.shape[0] // ts), -(-mask.shape[1] // ts)
