@@ -319,7 +319,7 @@ def test_rows_not_in_matches_the_dense_comparison():
 
 
 def _bars():
-    """A 640x480 image with a horizontal bar across the middle and a small square at the left."""
+    """Paint a 640x480 image: a horizontal bar across the middle, a small square at the left."""
     img = np.full((480, 640), 60, np.uint8)
     cv2.rectangle(img, (100, 200), (540, 260), 200, -1)       # edges v = 200 and 260
     cv2.rectangle(img, (20, 20), (80, 80), 200, -1)
