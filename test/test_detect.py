@@ -185,7 +185,8 @@ def test_callable_backend():
 
 def _hatched(seed, tilt_deg=7.0, cross_deg=38.0, stripe_px=3.0, period_px=10.0, size=160,
              stripes_from=-np.inf):
-    """Cross-hatched face: a band 40 px wide, tilted, crossed by thin dark stripes.
+    """
+    Cross-hatched face: a band 40 px wide, tilted, crossed by thin dark stripes.
 
     Stripes only right of column ``stripes_from`` px (default: everywhere on the face).
 

@@ -240,8 +240,8 @@ def remap_velocity(old: np.ndarray, vel: np.ndarray, new: np.ndarray) -> np.ndar
     displacement is taken as affine in the position along the line (exact for an affine image
     motion), so the far end of a grown line moves as the line's extrapolated motion says.
     Applied unchanged instead, a turning line whose extent a detection had cut was
-    mispredicted in the next frame (measured: tracked-5 +0.9-1.3 points on own_centre, bench
-    frontend).
+    mispredicted in the next frame (measured: tracked-5 +0.9-1.3 points on three of six
+    own_centre seeds, -0.4 on one, bench frontend).
     """
     d = old[:, 2:] - old[:, :2]
     l2 = np.maximum(np.einsum('ij,ij->i', d, d), 1e-9)

@@ -191,7 +191,7 @@ def refine_lines(image: np.ndarray, seg: np.ndarray, n_samples: int = 12, radius
     gradient magnitude (at least ``min_gradient`` grey levels per 2 px and ``min_relative``
     of the strongest in the window), refined to sub-pixel by a parabola, is the edge point.
     ``signed`` (bool, or (T,) bool): count only the gradient of the segment's polarity
-    (brighter side on the left, see :mod:`mlofc_ros.segments.detect`), so that the opposite
+    (brighter side on the left, see :mod:`mlofc_ros.segments.merge`), so that the opposite
     edges of neighbouring stripes are not candidates; ``None`` = unsigned.
     ``prefer_polarity`` (px): an unsigned search still, but a peak of the opposite polarity
     counts as that much further from the prediction (so the edge's own polarity wins over a
