@@ -39,9 +39,9 @@ import numpy as np
 from mlofc_ros import params as _params
 from mlofc_ros.bodies import BodyTracker, relabel
 from mlofc_ros.camera import as_camera, CameraLike, CameraModel
-from mlofc_ros.segments.detect import LineDetector
 from mlofc_ros.solver import segment_lines
 from mlofc_ros.solver.robust import WARM_INLIERS as ROBUST_WARM_INLIERS
+from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_ros.tracks.undistort import undistort_segments
 from mlofc_ros.tracks.window import TrackWindow
@@ -301,20 +301,9 @@ def _check_size(image_size: Any) -> Tuple[int, int]:
     return w, h
 
 
-def make_detector(params: Mapping[str, Any]) -> LineDetector:
-    """Build the line detector the pipeline runs with ``params`` (node names, all set)."""
-    backend = 'fld' if params['detector_backend'] == 'fld' else 'lsd_resize'
-    return LineDetector(min_length=float(params['min_segment_length']), backend=backend,
-                        scale=float(params['detector_scale']),
-                        bridge=bool(params['bridge_crossings']))
-
-
 def make_tracker(params: Mapping[str, Any]) -> LineTracker:
-    """Build the line tracker (with :func:`make_detector`) the pipeline runs with ``params``."""
-    return LineTracker(make_detector(params), min_length=float(params['min_segment_length']),
-                       detect_every=int(params['detect_every']),
-                       detect_every_max=int(params['detect_every_max']),
-                       detect_regions=bool(params['detect_regions']))
+    """Build the line tracker the pipeline runs with ``params`` (node names)."""
+    return LineTracker(TrackerConfig.from_params(params))
 
 
 class Pipeline:
@@ -387,12 +376,7 @@ class Pipeline:
             self.bodies.forget_tracks()
         else:
             # detection settings, not state: the tracks carry on
-            self._tracker.detect_every = int(self.params['detect_every'])
-            self._tracker.detect_every_max = int(self.params['detect_every_max'])
-            self._tracker.detect_regions = bool(self.params['detect_regions'])
-            if changed & {'detector_backend', 'detector_scale'}:
-                self._tracker.detector = make_detector(self.params)
-            self._tracker.detector.bridge = bool(self.params['bridge_crossings'])
+            self._tracker.reconfigure(TrackerConfig.from_params(self.params))
         if 'window' in changed:
             self._window = TrackWindow(self.params['window'])
             self._stamps = deque(maxlen=self.params['window'])

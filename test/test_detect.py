@@ -16,8 +16,10 @@ import cv2
 import numpy as np
 import pytest
 
-from mlofc_ros.segments.detect import (_rows_not_in, bridge_crossings, LineDetector,
-                                       merge_collinear, orient_by_polarity)
+from mlofc_ros.segments.bridge import HOUGH_BINS
+from mlofc_ros.segments.detect import (bridge_crossings, LineDetector, merge_collinear,
+                                       orient_by_polarity)
+from mlofc_ros.segments.merge import rows_not_in
 
 
 def _on_line(seg, gt, angle_deg=3.0, dist_px=2.0):
@@ -176,14 +178,15 @@ def test_coarse_lsd_bins_find_the_same_edges():
 
 def test_callable_backend():
     fixed = np.array([[0, 0, 30, 0], [0, 0, 5, 0]], np.float32)
-    det = LineDetector(backend=lambda g: fixed, orient=False, merge=False)
+    det = LineDetector(backend=lambda g: fixed)
     out = det.detect(np.zeros((50, 50), np.uint8))
     np.testing.assert_allclose(out, fixed[:1])
 
 
 def _hatched(seed, tilt_deg=7.0, cross_deg=38.0, stripe_px=3.0, period_px=10.0, size=160,
              stripes_from=-np.inf):
-    """Cross-hatched face: a band 40 px wide, tilted, crossed by thin dark stripes.
+    """
+    Cross-hatched face: a band 40 px wide, tilted, crossed by thin dark stripes.
 
     Stripes only right of column ``stripes_from`` px (default: everywhere on the face).
 
@@ -287,15 +290,14 @@ def test_bridge_sort_key_orders_each_hough_line_like_lexsort():
     # a position. The bins' normal angles ((i + 0.5) x 3 deg) have irrational slopes, so over a
     # whole 640x480 image the positions of distinct pixels differ by far more than the key's
     # rounding (< 1e-9 px for thousands of lines x span), and the order is lexsort's
-    from mlofc_ros.segments.detect import _HOUGH_BINS
-    centre = (np.arange(_HOUGH_BINS) + 0.5) * (np.pi / _HOUGH_BINS)
+    centre = (np.arange(HOUGH_BINS) + 0.5) * (np.pi / HOUGH_BINS)
     ys, xs = np.mgrid[0:480, 0:640]
     xs, ys = xs.ravel().astype(np.float64), ys.ravel().astype(np.float64)
     gaps = [np.diff(np.sort(ys * np.cos(a) - xs * np.sin(a))).min() for a in centre]
     assert min(gaps) > 1e-5
     rng = np.random.default_rng(0)
     pick = rng.integers(0, xs.size, 20000)
-    c = rng.integers(0, _HOUGH_BINS, pick.size)
+    c = rng.integers(0, HOUGH_BINS, pick.size)
     keep = np.unique(np.stack([c, pick]), axis=1)          # a pixel at most once per line
     c, px, py = keep[0], xs[keep[1]], ys[keep[1]]
     t = py * np.cos(centre[c]) - px * np.sin(centre[c])
@@ -312,13 +314,13 @@ def test_rows_not_in_matches_the_dense_comparison():
                           base[:40] + rng.choice([-2e-3, -5e-4, 5e-4, 2e-3], (40, 4)),
                           np.round(rng.random((50, 4)) * 50.0)]).astype(np.float32)
     dense = ~(np.abs(seg[:, None] - base[None]).max(axis=2) <= 1e-3).any(axis=1)
-    np.testing.assert_array_equal(_rows_not_in(seg, base), dense)
+    np.testing.assert_array_equal(rows_not_in(seg, base), dense)
     assert 0 < dense.sum() < seg.shape[0]
-    assert _rows_not_in(seg, base[:0]).all() and _rows_not_in(seg[:0], base).shape == (0,)
+    assert rows_not_in(seg, base[:0]).all() and rows_not_in(seg[:0], base).shape == (0,)
 
 
 def _bars():
-    """A 640x480 image with a horizontal bar across the middle and a small square at the left."""
+    """Paint a 640x480 image: a horizontal bar across the middle, a small square at the left."""
     img = np.full((480, 640), 60, np.uint8)
     cv2.rectangle(img, (100, 200), (540, 260), 200, -1)       # edges v = 200 and 260
     cv2.rectangle(img, (20, 20), (80, 80), 200, -1)

@@ -12,6 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Line segment detection: ``(u1, v1, u2, v2)`` pixel segments from gray images."""
-from mlofc_ros.segments.detect import LineDetector, merge_collinear, orient_by_polarity
+from mlofc_ros.segments.bridge import bridge_crossings
+from mlofc_ros.segments.detect import LineDetector
+from mlofc_ros.segments.merge import merge_collinear, orient_by_polarity
 
-__all__ = ['LineDetector', 'merge_collinear', 'orient_by_polarity']
+__all__ = ['bridge_crossings', 'LineDetector', 'merge_collinear', 'orient_by_polarity']

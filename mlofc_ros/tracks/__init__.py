@@ -12,8 +12,10 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Line tracks: persistent ids over frames, undistortion, and the solver's sliding window."""
+from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_ros.tracks.undistort import undistort_points, undistort_segments
 from mlofc_ros.tracks.window import TrackWindow
 
-__all__ = ['LineTracker', 'TrackWindow', 'undistort_points', 'undistort_segments']
+__all__ = ['LineTracker', 'TrackerConfig', 'TrackWindow', 'undistort_points',
+           'undistort_segments']

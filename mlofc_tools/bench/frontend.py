@@ -32,6 +32,7 @@ import numpy as np
 from mlofc_tools.bench import common
 from mlofc_tools.datasets.shared import shared_data_dir
 from mlofc_ros.segments.detect import has_ximgproc, LineDetector
+from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
 
 #: Real sequences (no ground truth), see ``/work/shared/data/real/README.md``.
@@ -515,22 +516,22 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--seeds', default='0,1,2,3', help='render seeds (comma separated)')
     ap.add_argument('--boxes', default='2,3', help='boxes per sequence, cycled over seeds')
     ap.add_argument('--detect-every', type=int, default=None,
-                    help='LineTracker.detect_every (default: the tracker default)')
+                    help='TrackerConfig.detect_every (default: the tracker default)')
     ap.add_argument('--detect-every-max', type=int, default=None,
-                    help='LineTracker.detect_every_max: longest detection interval in a quiet '
+                    help='TrackerConfig.detect_every_max: longest detection interval in a quiet '
                          'scene (default: the tracker default)')
     ap.add_argument('--regions', choices=('on', 'off'), default=None,
-                    help='LineTracker.detect_regions: detection on demand on the image regions '
+                    help='TrackerConfig.detect_regions: detection on demand on the image regions '
                          'no track explains (default: the tracker default)')
     ap.add_argument('--backend', default=None,
                     help='tracker detector backend (lsd, lsd_resize, fld, edlines)')
     ap.add_argument('--scale', type=float, default=None, help='tracker detector scale')
     ap.add_argument('--bridge', choices=('on', 'off', 'join'), default=None,
-                    help='tracker detector LineDetector(bridge=...): lines cut up by crossings '
+                    help='TrackerConfig.bridge_crossings: lines cut up by crossings '
                          'added (on, the default), not (off), or joined with the segments they '
                          'continue (join: bridge_join=True)')
     ap.add_argument('--lsd-bins', type=int, default=None,
-                    help='tracker detector LineDetector(lsd_bins=...): gradient-norm bins of LSD')
+                    help='TrackerConfig.lsd_bins: gradient-norm bins of LSD')
     ap.add_argument('--real-dir', default=REAL_DIR)
     ap.add_argument('--real-frames', type=int, default=80)
     ap.add_argument('--quick', action='store_true', help='10 frames, one seed (smoke run)')
@@ -567,6 +568,20 @@ def _detector_table(rows: Sequence[Dict[str, object]]) -> str:
          for r in rows])
 
 
+def tracker_config(args: argparse.Namespace) -> TrackerConfig:
+    """Return the tracker settings the options ask for (the defaults for the others)."""
+    kw = {name: value for name, value in (
+        ('detect_every', args.detect_every), ('detect_every_max', args.detect_every_max),
+        ('detector_backend', args.backend), ('detector_scale', args.scale),
+        ('lsd_bins', args.lsd_bins)) if value is not None}
+    if args.regions is not None:
+        kw['detect_regions'] = args.regions == 'on'
+    if args.bridge is not None:
+        kw['bridge_crossings'] = args.bridge != 'off'
+        kw['bridge_join'] = args.bridge == 'join'
+    return TrackerConfig(**kw)
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the benchmark; returns the process exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -583,23 +598,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.detectors_only:
         print(json.dumps(det_rows, indent=1))
         return 0
-    kw: Dict[str, object] = {}
-    if args.detect_every is not None:
-        kw['detect_every'] = args.detect_every
-    if args.detect_every_max is not None:
-        kw['detect_every_max'] = args.detect_every_max
-    if args.regions is not None:
-        kw['detect_regions'] = args.regions == 'on'
-    det_kw = {k: v for k, v in (('backend', args.backend), ('scale', args.scale),
-                                ('lsd_bins', args.lsd_bins)) if v is not None}
-    if args.bridge is not None:
-        det_kw['bridge'] = args.bridge != 'off'
-        det_kw['bridge_join'] = args.bridge == 'join'
-    if det_kw:
-        kw['detector'] = LineDetector(**det_kw)
+    config = tracker_config(args)
 
     def make() -> LineTracker:
-        return LineTracker(**kw)
+        return LineTracker(config)
     common.eprint('frontend: tracking (rendered)')
     track_rows, time_rows, track_runs, survival = [], [], [], {}
     pooled: List[Dict[str, float]] = []
@@ -651,18 +653,11 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
                  tracker: LineTracker) -> str:
     """Markdown report of the front-end benchmark."""
     command = common.command_line('frontend', argv)
-    det = tracker.detector
     lines = [common.run_header(
         'Front end: line detection and tracking', command,
         {'OpenCV': f'{cv2.__version__}, cv2.setNumThreads(1); timings are wall-clock on a '
                    'shared machine: compare against the LSD reference measured in the same run',
-         'Tracker': f'LineTracker(detect_every={tracker.detect_every}, '
-                    f'detect_every_max={tracker.detect_every_max}, '
-                    f'detect_regions={tracker.detect_regions}, '
-                    f'min_length={tracker.min_length:g}) with '
-                    f'LineDetector(backend={det.backend!r}, scale={det.scale:g}, '
-                    f'bridge={det.bridge}, bridge_join={det.bridge_join}, '
-                    f'lsd_bins={det.lsd_bins})',
+         'Tracker': f'LineTracker({tracker.config})',
          'Run time': f'{seconds:.0f} s'})]
     lines += ['## Detectors on rendered frames', '',
               'Every 3rd frame of the rendered sequences below. A detection matches a GT edge '
