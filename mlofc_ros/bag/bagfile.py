@@ -185,7 +185,7 @@ class BagReader:
 
     @property
     def message_count(self) -> int:
-        """Number of (complete) messages."""
+        """Return the number of (complete) messages."""
         return sum(self.message_counts.values())
 
     def close(self) -> None:

@@ -284,12 +284,12 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
         if bag.incomplete:
             stats.incomplete, stats.recovered = True, bag.message_count
             out_log.write(f'mlofc_bag: warning: {input_path}: incomplete bag '
-                      f'({"; ".join(bag.problems)}); recovered {bag.message_count} complete '
-                      f'messages ({bag.message_counts.get(stats.image_topic, 0)} images); '
-                      '--strict refuses such a bag\n')
+                          f'({"; ".join(bag.problems)}); recovered {bag.message_count} complete '
+                          f'messages ({bag.message_counts.get(stats.image_topic, 0)} images); '
+                          '--strict refuses such a bag\n')
         if stats.camera_info_topic is None:
             out_log.write(f'mlofc_bag: no CameraInfo topic for {stats.image_topic}; the focal '
-                      'length is estimated (or set -p focal_length:=...)\n')
+                          'length is estimated (or set -p focal_length:=...)\n')
         stats.images = bag.message_counts.get(stats.image_topic, 0)
         if stats.images == 0:
             raise BagError(f'{input_path}: image topic {stats.image_topic} has no messages')
