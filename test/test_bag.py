@@ -13,11 +13,15 @@
 # limitations under the License.
 
 """Bag tools: rosbag2 round trips (mcap, sqlite3), ``mlofc_bag`` end to end, ``mlofc_play``."""
+import os
 from pathlib import Path
+import shutil
+import signal
 import subprocess
 import sys
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -243,3 +247,271 @@ def test_camera_info_pairing():
     pairing.add_info(CameraInfo())                      # all-zero K: remembered as a problem
     assert 'invalid CameraInfo' in pairing.problem
     assert CameraInfoPairing().camera((64, 48)) == (None, None)
+
+
+# --- incomplete bags: what is recovered must be exactly what was written before the cut ---
+
+def _write_mcap(path, n, compressed=False, shape=(120, 160)):
+    """Write ``n`` images (and CameraInfo) as mcap; return the messages in write order."""
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+
+    from mlofc_ros.bag.bagfile import camera_info_cdr, image_cdr, QOS_PROFILES, typestore
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    if compressed:
+        writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    written = []
+    with writer:
+        info = writer.add_connection('/camera/camera_info', CAMERA_INFO_TYPE,
+                                     typestore=typestore(),
+                                     offered_qos_profiles=[QOS_PROFILES['reliable']])
+        image = writer.add_connection('/camera/image_raw', IMAGE_TYPE, typestore=typestore(),
+                                      offered_qos_profiles=[QOS_PROFILES['sensor_data']])
+        for frame, t in zip(_frames(n, shape), range(10**9, 10**9 + n * 33_000_000, 33_000_000)):
+            for conn, raw in ((info, camera_info_cdr(CAMERA, shape[1], shape[0], t)),
+                              (image, image_cdr(frame, t))):
+                writer.write(conn, t, raw)
+                written.append((conn.topic, t, raw))
+    return written
+
+
+def _chunks(mcap):
+    """``(end byte, messages)`` of each chunk record, from the intact file's own index."""
+    from rosbags.rosbag2.storage_mcap import McapReader
+    reader = McapReader(mcap)
+    reader.open()
+    try:
+        return [(c.chunk_start_offset + c.chunk_length, sum(c.channel_count.values()))
+                for c in reader.chunks]
+    finally:
+        reader.close()
+
+
+def _cut(src, dst_dir, n_bytes, keep_metadata=False):
+    dst_dir.mkdir()
+    (dst_dir / src.name).write_bytes(src.read_bytes()[:n_bytes])
+    if keep_metadata:
+        (dst_dir / 'metadata.yaml').write_bytes((src.parent / 'metadata.yaml').read_bytes())
+    return dst_dir
+
+
+def _read_all(path, **kw):
+    with BagReader(path, **kw) as bag:
+        info = SimpleNamespace(incomplete=bag.incomplete, problems=bag.problems,
+                               message_counts=bag.message_counts, start_ns=bag.start_ns)
+        return info, [(m.topic, m.timestamp_ns, m.rawdata) for m in bag.messages()]
+
+
+@pytest.mark.parametrize('compressed', [False, True], ids=['plain', 'zstd'])
+@pytest.mark.parametrize('where', ['inside_chunk', 'between_chunks', 'sixty_percent',
+                                   'last_byte', 'inside_header'])
+def test_truncated_mcap_recovers_every_complete_chunk(tmp_path, compressed, where):
+    written = _write_mcap(tmp_path / 'full', 120, compressed)
+    mcap = tmp_path / 'full' / 'full.mcap'
+    size = mcap.stat().st_size
+    chunks = _chunks(mcap)
+    assert len(chunks) >= 3        # the cut points below need several chunks
+    cut = {'inside_chunk': chunks[1][0] - 1000, 'between_chunks': chunks[0][0],
+           'sixty_percent': int(0.6 * size), 'last_byte': size - 1, 'inside_header': 20}[where]
+    bag_dir = _cut(mcap, tmp_path / 'cut', cut, keep_metadata=where == 'last_byte')
+    expected = sum(count for end, count in chunks if end <= cut)
+    if expected == 0:
+        with pytest.raises(BagError, match='no complete message') as err:
+            BagReader(bag_dir).open()
+        assert str(bag_dir) in str(err.value) and '\n' not in str(err.value)
+        return
+    bag, got = _read_all(bag_dir)
+    assert bag.incomplete and bag.problems
+    assert got == written[:expected]               # byte-identical, in order, nothing more
+    assert sum(bag.message_counts.values()) == expected
+    assert bag.start_ns == written[0][1]
+    with pytest.raises(BagError, match='incomplete bag.*without --strict'):
+        BagReader(bag_dir, strict=True).open()
+
+
+def test_mcap_without_metadata_or_footer_but_whole(tmp_path):
+    """A recorder killed after its last chunk: every message is there, the bag says so."""
+    written = _write_mcap(tmp_path / 'full', 10)
+    (tmp_path / 'full' / 'metadata.yaml').unlink()
+    bag, got = _read_all(tmp_path / 'full')
+    assert got == written and bag.incomplete
+    assert any('metadata.yaml' in p for p in bag.problems)
+
+
+def _sqlite_bag(tmp_path, n=60):
+    write_image_bag(tmp_path / 'full', _frames(n, (120, 160)), [1.0 + i / 30 for i in range(n)],
+                    CAMERA, storage='sqlite3')
+    _, written = _read_all(tmp_path / 'full')
+    return tmp_path / 'full' / 'full.db3', written
+
+
+@pytest.mark.parametrize('fraction', [0.3, 0.6, 0.95])
+@pytest.mark.parametrize('metadata', [True, False], ids=['metadata', 'no_metadata'])
+def test_truncated_sqlite3_recovers_the_rows_on_disk(tmp_path, fraction, metadata):
+    db3, written = _sqlite_bag(tmp_path)
+    bag_dir = _cut(db3, tmp_path / 'cut', int(fraction * db3.stat().st_size), metadata)
+    bag, got = _read_all(bag_dir)
+    assert bag.incomplete and any('cut short' in p for p in bag.problems)
+    # rows are stored in insertion order: what is left is a prefix of what was written
+    assert 0.5 * fraction * len(written) < len(got) < len(written)
+    assert got == written[:len(got)]
+
+
+def test_sqlite3_without_metadata_reads_every_row(tmp_path, capsys):
+    db3, written = _sqlite_bag(tmp_path, 6)
+    (db3.parent / 'metadata.yaml').unlink()
+    bag, got = _read_all(db3.parent)
+    assert got == written and bag.problems == ['no metadata.yaml (the recording was not closed)']
+    with pytest.raises(BagError, match='no metadata.yaml'):
+        BagReader(db3.parent, strict=True).open()
+
+
+def test_sqlite3_unflushed_messages_are_dropped(tmp_path):
+    """A writer that dies mid-transaction leaves a hot journal: only committed rows count."""
+    db3, written = _sqlite_bag(tmp_path, 20)
+    bag_dir = tmp_path / 'killed'
+    bag_dir.mkdir()
+    shutil.copyfile(db3, bag_dir / db3.name)
+    # uncommitted rows spill into the database file itself (tiny cache), then the process dies
+    code = ('import os, sqlite3, sys\n'
+            'c = sqlite3.connect(sys.argv[1])\n'
+            'c.execute("PRAGMA cache_size = 1")\n'
+            'for i in range(100):\n'
+            '    c.execute("INSERT INTO messages (topic_id, timestamp, data) VALUES (1, ?, ?)",\n'
+            '              (10**12 + i, os.urandom(20000)))\n'
+            'os._exit(0)\n')
+    subprocess.run([sys.executable, '-c', code, str(bag_dir / db3.name)], check=True)
+    assert (bag_dir / (db3.name + '-journal')).exists()
+    bag, got = _read_all(bag_dir)
+    assert got == written and bag.incomplete
+    assert any('journal' in p for p in bag.problems)
+    assert sorted(p.name for p in bag_dir.iterdir()) == [db3.name, db3.name + '-journal']
+
+
+def test_bag_path_errors_say_what_is_wrong(tmp_path, capsys):
+    empty = tmp_path / 'empty'
+    empty.mkdir()
+    with pytest.raises(BagError, match=f'{empty}: empty folder; expected a rosbag2 bag'):
+        BagReader(empty).open()
+    other = tmp_path / 'photos'
+    other.mkdir()
+    (other / 'a.png').write_bytes(b'')
+    with pytest.raises(BagError, match=f'{other}: not a bag: no metadata.yaml and no .mcap'):
+        BagReader(other).open()
+    text = tmp_path / 'notes.txt'
+    text.write_text('hello')
+    with pytest.raises(BagError, match=r"not a bag file \(suffix '.txt'\); expected"):
+        BagReader(text).open()
+    junk = tmp_path / 'junk.mcap'
+    junk.write_bytes(b'definitely not mcap')
+    with pytest.raises(BagError, match=f'{junk}: cannot read bag: junk.mcap: not an mcap file'):
+        BagReader(junk).open()
+    junk_db = tmp_path / 'junk.db3'
+    junk_db.write_bytes(b'x' * 4096)
+    with pytest.raises(BagError, match='not a readable sqlite3 database'):
+        BagReader(junk_db).open()
+    no_files = tmp_path / 'no_files'
+    no_files.mkdir()
+    (no_files / 'metadata.yaml').write_text('rosbag2_bagfile_information: {}')
+    with pytest.raises(BagError, match='storage files are missing'):
+        BagReader(no_files).open()
+    # the command line gives the same one line, no traceback
+    assert bag_main([str(empty), str(tmp_path / 'out')]) == 1
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'empty folder' in err and 'Traceback' not in err
+
+
+@pytest.mark.skipif(hasattr(os, 'geteuid') and os.geteuid() == 0,
+                    reason='root reads files whatever their mode')
+def test_unreadable_bag_file(tmp_path):
+    _write_mcap(tmp_path / 'bag', 2)
+    mcap = tmp_path / 'bag' / 'bag.mcap'
+    mcap.chmod(0)
+    with pytest.raises(BagError, match=str(tmp_path / 'bag')):
+        BagReader(tmp_path / 'bag').open()
+
+
+def test_writer_never_leaves_a_half_written_bag(tmp_path):
+    out = tmp_path / 'out'
+    with BagWriter(out) as bag:
+        bag.add_topic('/chatter', 'std_msgs/msg/String')
+        bag.write('/chatter', 1, b'\x00\x01\x00\x00\x02\x00\x00\x00a\x00')
+        assert not out.exists()                       # written elsewhere until complete
+    assert (out / 'metadata.yaml').is_file() and (out / 'out.mcap').is_file()
+    with BagWriter(out, overwrite=True) as bag:
+        bag.add_topic('/other', 'std_msgs/msg/String')
+        assert (out / 'metadata.yaml').is_file()      # the old bag stays until replaced
+    with BagReader(out) as bag:
+        assert bag.topics == {'/other': 'std_msgs/msg/String'}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['out']   # no temporary left
+
+
+def test_mlofc_bag_processes_a_cut_recording(tmp_path, capsys):
+    from mlofc_ros.render import render_sequence
+    seq = render_sequence(n_boxes=1, n_frames=36, size=(320, 240), seed=3)
+    write_image_bag(tmp_path / 'rec', seq.frames, seq.stamps, seq.camera)
+    mcap = tmp_path / 'rec' / 'rec.mcap'
+    chunks = _chunks(mcap)
+    cut = _cut(mcap, tmp_path / 'cut', int(0.6 * mcap.stat().st_size))
+    recovered = sum(count for end, count in chunks if end <= int(0.6 * mcap.stat().st_size))
+    assert recovered > 0
+    assert bag_main([str(cut), str(tmp_path / 'strict'), '--strict', '-q']) == 1
+    err = capsys.readouterr().err
+    assert 'incomplete bag' in err and not (tmp_path / 'strict').exists()
+    assert bag_main([str(cut), str(tmp_path / 'out'), '-q']) == 0
+    err = capsys.readouterr().err
+    assert f'warning: {cut}: incomplete bag' in err
+    assert f'recovered {recovered} complete messages ({recovered // 2} images)' in err
+    with BagReader(tmp_path / 'out') as bag:
+        counts = bag.message_counts
+        assert not bag.incomplete
+    assert counts['/camera/image_raw'] == counts['/mlofc/segments'] == recovered // 2
+
+
+@pytest.mark.slow
+def test_interrupted_mlofc_bag_keeps_a_finished_bag(tmp_path):
+    from mlofc_ros.render import render_sequence
+    seq = render_sequence(n_boxes=1, n_frames=200, size=(320, 240), seed=3)
+    write_image_bag(tmp_path / 'in', seq.frames, seq.stamps, seq.camera)
+    proc = subprocess.Popen([_script('mlofc_bag'), str(tmp_path / 'in'), str(tmp_path / 'out')],
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        first = proc.stderr.readline()          # the bar's first 10 % line (not a tty)
+        assert '/200' in first, first
+        proc.send_signal(signal.SIGINT)
+        err = first + proc.communicate(timeout=120)[1]
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert 'kept in' in err and 'Traceback' not in err
+    kept = int(err.split('interrupted; the ')[1].split()[0])
+    assert 0 < kept < 200
+    with BagReader(tmp_path / 'out') as bag:
+        assert not bag.incomplete
+        images = [m.timestamp_ns for m in bag.messages(['/camera/image_raw'])]
+        segments = [m.timestamp_ns for m in bag.messages(['/mlofc/segments'])]
+    with BagReader(tmp_path / 'in') as bag:
+        written = [m.timestamp_ns for m in bag.messages(['/camera/image_raw'])]
+    assert images == written[:len(images)] and segments == images[-len(segments):]
+    assert len(segments) == kept
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['in', 'out']
+
+
+@pytest.mark.ros
+def test_mlofc_play_stops_cleanly_on_ctrl_c(tmp_path):
+    write_image_bag(tmp_path / 'bag', _frames(60), [i / 30 for i in range(60)], CAMERA)
+    rng = np.random.default_rng(7)
+    for _ in range(4):
+        # --rate 0 --loop: publishing all the time, so the signal lands inside a publish
+        proc = subprocess.Popen([_script('mlofc_play'), str(tmp_path / 'bag'), '--rate', '0',
+                                 '--loop'], stderr=subprocess.PIPE, text=True)
+        try:
+            started = proc.stderr.readline()
+            assert 'playing' in started, started
+            time.sleep(rng.uniform(0.05, 0.5))
+            proc.send_signal(signal.SIGINT)
+            err = started + proc.communicate(timeout=30)[1]
+        finally:
+            proc.kill()
+        assert proc.returncode == 0, err
+        assert 'Traceback' not in err and 'Error' not in err
+        assert 'stopped; published' in err

@@ -31,6 +31,7 @@ from functools import lru_cache
 import importlib
 from pathlib import Path
 import shutil
+import tempfile
 from types import TracebackType
 from typing import (Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Sequence, Type,
                     Union)
@@ -42,6 +43,7 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 from rosbags.typesys.store import Typestore
 
+from mlofc_ros.bag.recovery import layout, RecoveredBag, RecoveryError
 from mlofc_ros.camera import CameraModel
 
 #: Storage plugins this module writes; both are read back (``Reader`` detects the format).
@@ -125,32 +127,75 @@ def deserialize(rawdata: bytes, msgtype: str) -> Any:
 
 
 class BagReader:
-    """Read a rosbag2 bag (directory with ``metadata.yaml``, or a bare ``.mcap``/``.db3`` file).
+    """
+    Read a rosbag2 bag (directory with ``metadata.yaml``, or a bare ``.mcap``/``.db3`` file).
 
     A context manager; ``topics`` maps topic -> message type, ``messages()`` yields
-    :class:`BagMessage` in timestamp order.
+    :class:`BagMessage` in timestamp order. A bag that was not closed (cut short, no
+    ``metadata.yaml``, an unapplied journal) is read from its complete messages: ``incomplete``
+    is then True and ``problems`` says why; with ``strict`` such a bag raises ``BagError``.
     """
 
-    def __init__(self, path: PathLike) -> None:
+    def __init__(self, path: PathLike, strict: bool = False) -> None:
         self.path = Path(path)
+        self.strict = strict
         self._reader: Optional[Reader] = None
+        self._recovered: Optional[RecoveredBag] = None
+        #: True when the bag was not closed properly and only its complete messages are read
+        self.incomplete = False
+        self.problems: List[str] = []
 
     def open(self) -> None:  # noqa: A003 (the context-manager protocol's name)
         """Open the bag; raise ``BagError`` naming the path when it is missing or unreadable."""
         if not self.path.exists():
             raise BagError(f'{self.path}: no such bag (file or directory)')
         try:
-            reader = Reader(self.path)
-            reader.open()
-        except Exception as exc:  # rosbags, sqlite, yaml and zstd all raise their own types
+            found = layout(self.path)
+        except RecoveryError as exc:
+            raise BagError(f'{self.path}: {exc}') from None
+        problems = list(found.problems)
+        if not problems:
+            try:
+                reader = Reader(self.path)
+                reader.open()
+                self._reader = reader
+                return
+            except Exception as exc:  # rosbags, sqlite, yaml and zstd all raise their own types
+                # e.g. 'File end magic is invalid.': an mcap file without its summary
+                problems.append(f'cannot read it whole: {str(exc).rstrip(".")}')
+        self._open_recovered(found.files, problems)
+
+    def _open_recovered(self, files: List[Path], problems: List[str]) -> None:
+        try:
+            recovered = RecoveredBag(files, problems)
+        except RecoveryError as exc:
             raise BagError(f'{self.path}: cannot read bag: {exc}') from None
-        self._reader = reader
+        why = '; '.join(recovered.problems)
+        n = recovered.message_count
+        if n == 0:
+            recovered.close()
+            raise BagError(f'{self.path}: cannot read bag: {why}; no complete message in it')
+        if self.strict:
+            recovered.close()
+            raise BagError(f'{self.path}: incomplete bag: {why}; {n} complete messages could '
+                           'be recovered without --strict')
+        self._recovered = recovered
+        self.incomplete = True
+        self.problems = recovered.problems
+
+    @property
+    def message_count(self) -> int:
+        """Return the number of (complete) messages."""
+        return sum(self.message_counts.values())
 
     def close(self) -> None:
         """Close the bag (idempotent)."""
         reader, self._reader = self._reader, None
+        recovered, self._recovered = self._recovered, None
         if reader is not None:
             reader.close()
+        if recovered is not None:
+            recovered.close()
 
     def __enter__(self) -> 'BagReader':
         self.open()
@@ -162,19 +207,24 @@ class BagReader:
 
     @property
     def reader(self) -> Reader:
-        """Return the underlying, open ``rosbags`` Reader."""
+        """Return the underlying, open ``rosbags`` Reader (not for an incomplete bag)."""
         if self._reader is None:
-            raise BagError(f'{self.path}: bag is not open')
+            raise BagError(f'{self.path}: bag is not open'
+                           + (' with rosbags (incomplete)' if self._recovered else ''))
         return self._reader
 
     @property
     def topics(self) -> Dict[str, str]:
         """Topic name -> message type (``pkg/msg/Name``)."""
+        if self._recovered is not None:
+            return dict(self._recovered.topics)
         return {c.topic: c.msgtype for c in self.reader.connections}
 
     @property
     def message_counts(self) -> Dict[str, int]:
         """Topic name -> number of messages."""
+        if self._recovered is not None:
+            return dict(self._recovered.counts)
         counts: Dict[str, int] = {}
         for c in self.reader.connections:
             counts[c.topic] = counts.get(c.topic, 0) + c.msgcount
@@ -183,11 +233,15 @@ class BagReader:
     @property
     def start_ns(self) -> int:
         """Timestamp (ns) of the first message."""
+        if self._recovered is not None:
+            return self._recovered.start_ns
         return int(self.reader.start_time)
 
     @property
     def duration_ns(self) -> int:
         """Nanoseconds between the first and the last message."""
+        if self._recovered is not None:
+            return self._recovered.duration_ns
         return int(self.reader.duration)
 
     @property
@@ -203,27 +257,38 @@ class BagReader:
     def messages(self, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
         """Yield the messages of ``topics`` (all when None) in timestamp order."""
         wanted = None if topics is None else set(topics)
-        conns = [c for c in self.reader.connections if wanted is None or c.topic in wanted]
-        if not conns:
-            return
         try:
+            if self._recovered is not None:
+                for topic, stamp, raw, msgtype in self._recovered.messages(wanted):
+                    yield BagMessage(topic, stamp, raw, msgtype)
+                return
+            conns = [c for c in self.reader.connections if wanted is None or c.topic in wanted]
+            if not conns:
+                return
             for conn, stamp, raw in self.reader.messages(connections=conns):
                 yield BagMessage(conn.topic, int(stamp), bytes(raw), conn.msgtype)
+        except (BagError, GeneratorExit):
+            raise
         except Exception as exc:
             raise BagError(f'{self.path}: error while reading messages: {exc}') from None
 
 
-def read_bag(path: PathLike, topics: Optional[Iterable[str]] = None) -> Iterator[BagMessage]:
+def read_bag(path: PathLike, topics: Optional[Iterable[str]] = None, strict: bool = False
+             ) -> Iterator[BagMessage]:
     """Yield the messages of ``topics`` (all when None) of the bag at ``path``."""
-    with BagReader(path) as bag:
+    with BagReader(path, strict=strict) as bag:
         yield from bag.messages(topics)
 
 
 class BagWriter:
-    """Write a new rosbag2 bag (format version 9) in ``mcap`` (default) or ``sqlite3`` storage.
+    """
+    Write a new rosbag2 bag (format version 9) in ``mcap`` (default) or ``sqlite3`` storage.
 
-    A context manager: on a clean exit the bag is closed with its ``metadata.yaml``; on an
-    exception the half-written directory is removed. Topics must be added before writing.
+    A context manager. The bag is written in a hidden temporary folder next to ``path`` and
+    moved into place only when it is complete, so ``path`` never holds a half-written bag (an
+    existing bag there, with ``overwrite``, stays until the new one replaces it). On a clean
+    exit the bag is closed with its ``metadata.yaml``; on an exception the temporary folder is
+    removed. Topics must be added before writing.
     """
 
     def __init__(self, path: PathLike, storage: str = DEFAULT_STORAGE,
@@ -235,40 +300,80 @@ class BagWriter:
         self.storage = storage
         self.overwrite = overwrite
         self._writer: Optional[Writer] = None
+        self._tmpdir: Optional[Path] = None
         self._connections: Dict[str, Any] = {}
         self.counts: Dict[str, int] = {}
 
-    def open(self) -> None:  # noqa: A003 (the context-manager protocol's name)
-        """Create the bag directory; raise ``BagError`` if it exists (unless ``overwrite``)."""
+    def _check_target(self) -> None:
         if self.path.exists():
             if not self.overwrite:
                 raise BagError(f'{self.path}: output exists already, not overwriting')
-            if not (self.path / 'metadata.yaml').exists() and any(self.path.iterdir()):
+            if not self.path.is_dir() or (not (self.path / 'metadata.yaml').exists()
+                                          and any(self.path.iterdir())):
                 raise BagError(f'{self.path}: exists and is not a bag, not overwriting')
-            shutil.rmtree(self.path)
         if not self.path.parent.is_dir():
             raise BagError(f'{self.path}: parent directory does not exist')
-        writer = Writer(self.path, version=9, storage_plugin=STORAGES[self.storage])
+
+    def open(self) -> None:  # noqa: A003 (the context-manager protocol's name)
+        """Start the bag; raise ``BagError`` if ``path`` exists (unless ``overwrite``)."""
+        self._check_target()
+        try:
+            # same folder as the target: the final rename stays on one file system (atomic)
+            self._tmpdir = Path(tempfile.mkdtemp(prefix=f'.{self.path.name}.',
+                                                 suffix='.partial', dir=self.path.parent))
+        except OSError as exc:
+            raise BagError(f'{self.path}: cannot create bag: {exc}') from None
+        # the inner folder has the final name: rosbags names the storage file after it
+        writer = Writer(self._tmpdir / self.path.name, version=9,
+                        storage_plugin=STORAGES[self.storage])
         try:
             writer.open()
         except Exception as exc:
+            self._drop_tmpdir()
             raise BagError(f'{self.path}: cannot create bag: {exc}') from None
         self._writer = writer
 
     def close(self) -> None:
-        """Finish the bag and write ``metadata.yaml``."""
+        """Finish the bag, write ``metadata.yaml`` and move it to ``path``."""
         writer, self._writer = self._writer, None
-        if writer is not None:
+        if writer is None:
+            return
+        try:
             writer.close()
+            if self.path.exists():
+                self._check_target()   # something may have appeared there while writing
+        except BaseException:
+            self._drop_tmpdir()
+            raise
+        self._move_into_place()
+
+    def _move_into_place(self) -> None:
+        assert self._tmpdir is not None
+        done = self._tmpdir / self.path.name
+        old = self._tmpdir / (self.path.name + '.old')
+        try:
+            if self.path.exists():
+                self.path.rename(old)
+            done.rename(self.path)
+        except OSError as exc:
+            # keep the finished bag where it is: it is the result of the whole run
+            raise BagError(f'{self.path}: cannot move the finished bag into place ({exc}); '
+                           f'it is in {done}') from None
+        self._drop_tmpdir()
+
+    def _drop_tmpdir(self) -> None:
+        tmpdir, self._tmpdir = self._tmpdir, None
+        if tmpdir is not None:
+            shutil.rmtree(tmpdir, ignore_errors=True)
 
     def abort(self) -> None:
-        """Drop the half-written bag directory."""
+        """Drop the half-written bag (``path`` is left as it was)."""
         writer, self._writer = self._writer, None
-        if writer is not None:
-            try:
+        try:
+            if writer is not None:
                 writer.abort()
-            finally:
-                shutil.rmtree(self.path, ignore_errors=True)
+        finally:
+            self._drop_tmpdir()
 
     def __enter__(self) -> 'BagWriter':
         self.open()

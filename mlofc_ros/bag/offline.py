@@ -22,8 +22,11 @@ or RViz show input and result together. Parameters are the node's (``-p window:=
 import argparse
 from dataclasses import dataclass, field
 import math
+import signal
 import sys
+import threading
 import time
+from types import FrameType
 from typing import Any, Dict, List, Optional, Sequence, TextIO, Tuple
 
 from mlofc_ros import params as mlofc_params
@@ -103,6 +106,50 @@ class OfflineStats:
     pipeline_ms: List[float] = field(default_factory=list)
     image_topic: str = ''
     camera_info_topic: Optional[str] = None
+    incomplete: bool = False
+    recovered: int = 0
+    interrupted: bool = False
+
+
+class OfflineInterrupted(KeyboardInterrupt):
+    """
+    Ctrl-C stopped :func:`process_bag`; the output bag holds the frames processed until then.
+
+    ``stats`` are those of the frames processed; the output bag is finished and readable.
+    """
+
+    def __init__(self, stats: OfflineStats) -> None:
+        super().__init__('interrupted')
+        self.stats = stats
+
+
+class StopOnSigint:
+    """
+    Turn the first Ctrl-C into a request (``requested``) instead of an exception.
+
+    A loop checks ``requested`` between frames and ends cleanly; a second Ctrl-C raises
+    ``KeyboardInterrupt`` as usual. Only the main thread can handle signals: elsewhere this
+    does nothing.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: Any = None
+
+    def __enter__(self) -> 'StopOnSigint':
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum: int, frame: Optional[FrameType]) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __exit__(self, *exc: object) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None
 
 
 def choose_topics(topics: Dict[str, str], image_topic: Optional[str],
@@ -114,6 +161,10 @@ def choose_topics(topics: Dict[str, str], image_topic: Optional[str],
     """
     images = sorted(t for t, m in topics.items() if m == IMAGE_TYPE)
     infos = sorted(t for t, m in topics.items() if m == CAMERA_INFO_TYPE)
+    if not images:
+        found = ', '.join(f'{t} ({m})' for t, m in sorted(topics.items())) or 'no topics'
+        raise BagError(f'{path}: no image topic: 0 sensor_msgs/msg/Image topics in the bag (it '
+                       f'has {found}); expected a recording of a camera')
     if image_topic is None:
         if len(images) != 1:
             found = ', '.join(images) if images else 'none'
@@ -190,15 +241,21 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
                 parameters: Optional[Dict[str, Any]] = None, node_name: str = 'mlofc',
                 storage: str = DEFAULT_STORAGE, debug_image: Optional[bool] = None,
                 copy_input: bool = True, overwrite: bool = False,
-                progress: Optional[ProgressBar] = None, log: TextIO = sys.stderr
-                ) -> OfflineStats:
-    """Run the pipeline over ``input_path`` and write ``output_path``; return the stats.
+                progress: Optional[ProgressBar] = None, log: Optional[TextIO] = None,
+                strict: bool = False) -> OfflineStats:
+    """
+    Run the pipeline over ``input_path`` and write ``output_path``; return the stats.
 
     ``parameters`` are node parameters (:mod:`mlofc_ros.params`); ``debug_image`` None follows
     ``publish_debug_image``. Raises ``BagError`` for unreadable/unsuitable bags and
     ``ValueError`` for invalid parameters. Frames the pipeline rejects are counted in
-    ``stats.errors`` and skipped, as the node does.
+    ``stats.errors`` and skipped, as the node does. An incomplete input bag (cut short, not
+    closed) is read from its complete messages with a warning on ``log``, or refused with
+    ``strict``. The first Ctrl-C ends the run after the current frame: the output bag is
+    finished with the frames so far and :class:`OfflineInterrupted` is raised. ``progress``
+    gets its total from the bag; ``log`` (default: the current ``sys.stderr``) gets warnings.
     """
+    out_log: TextIO = sys.stderr if log is None else log
     from mlofc_ros.image.decode import image_msg_to_gray
     from mlofc_ros.messages.debug import draw_debug
     from mlofc_ros.pipeline import Pipeline
@@ -219,22 +276,32 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
         stats.errors[kind] = stats.errors.get(kind, 0) + 1
         if kind not in warned:
             warned.add(kind)
-            log.write(f'\nmlofc_bag: warning: {text} (further ones counted)\n')
+            out_log.write(f'\nmlofc_bag: warning: {text} (further ones counted)\n')
 
-    with BagReader(input_path) as bag:
+    with BagReader(input_path, strict=strict) as bag:
         stats.image_topic, stats.camera_info_topic = choose_topics(
             bag.topics, image_topic, camera_info_topic, input_path)
+        if bag.incomplete:
+            stats.incomplete, stats.recovered = True, bag.message_count
+            out_log.write(f'mlofc_bag: warning: {input_path}: incomplete bag '
+                          f'({"; ".join(bag.problems)}); recovered {bag.message_count} complete '
+                          f'messages ({bag.message_counts.get(stats.image_topic, 0)} images); '
+                          '--strict refuses such a bag\n')
         if stats.camera_info_topic is None:
-            log.write(f'mlofc_bag: no CameraInfo topic for {stats.image_topic}; the focal '
-                      'length is estimated (or set -p focal_length:=...)\n')
+            out_log.write(f'mlofc_bag: no CameraInfo topic for {stats.image_topic}; the focal '
+                          'length is estimated (or set -p focal_length:=...)\n')
         stats.images = bag.message_counts.get(stats.image_topic, 0)
         if stats.images == 0:
             raise BagError(f'{input_path}: image topic {stats.image_topic} has no messages')
         pairing = CameraInfoPairing(_first_camera(bag, stats.camera_info_topic))
         read = [stats.image_topic] + ([stats.camera_info_topic] if stats.camera_info_topic
                                       else [])
+        if progress is not None:
+            progress.total = max(stats.images, 1)
         n_fixed = int(all_values['num_bodies'])
-        with BagWriter(output_path, storage=storage, overwrite=overwrite) as out:
+        # the flag outlives the writer: a Ctrl-C while the bag is finished does not abort it
+        with StopOnSigint() as stop, BagWriter(output_path, storage=storage,
+                                               overwrite=overwrite) as out:
             if copy_input:
                 out.add_topic(stats.image_topic, IMAGE_TYPE, 'sensor_data')
                 if stats.camera_info_topic:
@@ -246,6 +313,9 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
                 out.add_topic(names['debug_image'], IMAGE_TYPE)
             done = 0
             for msg in bag.messages(read):
+                if stop.requested:
+                    stats.interrupted = True
+                    break
                 if copy_input:
                     out.write(msg.topic, msg.timestamp_ns, msg.rawdata)
                 if msg.topic != stats.image_topic:
@@ -290,9 +360,12 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
                     progress.update(done, f'{len(result.segments)} segments')
             stats.written = dict(out.counts)
     if progress is not None:
-        progress.update(stats.images)
+        if not stats.interrupted:
+            progress.update(stats.images)
         progress.close()
     stats.wall_time = time.monotonic() - t0
+    if stats.interrupted:
+        raise OfflineInterrupted(stats)
     return stats
 
 
@@ -319,12 +392,33 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--no-input', action='store_true',
                    help='do not copy the input images and camera info')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output bag')
+    p.add_argument('--strict', action='store_true',
+                   help='refuse an incomplete input bag (cut short, not closed) instead of '
+                        'reading its complete messages with a warning')
     p.add_argument('-q', '--quiet', action='store_true', help='no progress bar')
     return p
 
 
+def _report(stats: OfflineStats, output: str) -> None:
+    ms = sorted(x for x in stats.pipeline_ms if math.isfinite(x))
+    median = ms[len(ms) // 2] if ms else math.nan
+    print(f'mlofc_bag: {stats.processed}/{stats.images} images processed in '
+          f'{stats.wall_time:.1f} s (pipeline median {median:.1f} ms/frame) -> {output}',
+          file=sys.stderr)
+    for topic, count in sorted(stats.written.items()):
+        print(f'  {topic}: {count}', file=sys.stderr)
+    if stats.errors:
+        print(f'  frames with problems: {stats.errors}', file=sys.stderr)
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    """Entry point of ``mlofc_bag``; returns 0, 1 (bad input/bag) or 2 (bad arguments)."""
+    """
+    Entry point of ``mlofc_bag``; return the exit code.
+
+    0: done (also for an incomplete input bag whose complete messages were processed), 1: bad
+    input or bag, 2: bad arguments, 130: interrupted (what was processed is kept in the output
+    bag when the run had started writing it).
+    """
     args = _parser().parse_args(argv)
     try:
         parameters = parse_params(args.param)
@@ -334,32 +428,23 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.debug_image:
         parameters['publish_debug_image'] = True
     try:
-        with BagReader(args.input) as bag:
-            total = bag.message_counts
-            topics = bag.topics
-        image_topic, _ = choose_topics(topics, args.image_topic, args.camera_info_topic,
-                                       args.input)
-        bar = ProgressBar(total.get(image_topic, 0), enabled=not args.quiet)
         stats = process_bag(args.input, args.output, image_topic=args.image_topic,
                             camera_info_topic=args.camera_info_topic, parameters=parameters,
                             node_name=args.node_name, storage=args.storage,
                             copy_input=not args.no_input, overwrite=args.overwrite,
-                            progress=bar)
+                            progress=ProgressBar(0, enabled=not args.quiet), strict=args.strict)
     except (BagError, ValueError) as exc:
         print(f'mlofc_bag: error: {exc}', file=sys.stderr)
         return 1
+    except OfflineInterrupted as exc:
+        _report(exc.stats, args.output)
+        print(f'mlofc_bag: interrupted; the {exc.stats.processed} frames processed so far are '
+              f'kept in {args.output} (a finished bag)', file=sys.stderr)
+        return 130
     except KeyboardInterrupt:
         print('\nmlofc_bag: interrupted; no output written', file=sys.stderr)
         return 130
-    ms = sorted(x for x in stats.pipeline_ms if math.isfinite(x))
-    median = ms[len(ms) // 2] if ms else math.nan
-    print(f'mlofc_bag: {stats.processed}/{stats.images} images processed in '
-          f'{stats.wall_time:.1f} s (pipeline median {median:.1f} ms/frame) -> {args.output}',
-          file=sys.stderr)
-    for topic, count in sorted(stats.written.items()):
-        print(f'  {topic}: {count}', file=sys.stderr)
-    if stats.errors:
-        print(f'  frames with problems: {stats.errors}', file=sys.stderr)
+    _report(stats, args.output)
     return 0
 
 

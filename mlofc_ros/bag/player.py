@@ -22,16 +22,19 @@ effort, as camera drivers publish), everything else reliable QoS. As a library::
 """
 import argparse
 from dataclasses import dataclass, field
+import signal
 import sys
 import time
-from typing import Callable, Dict, List, Optional, Sequence
+from types import FrameType
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
 import rclpy
 from rclpy.duration import Duration
-from rclpy.executors import Executor, ExternalShutdownException
+from rclpy.executors import Executor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import (HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy)
+from rclpy.signals import SignalHandlerOptions
 
 from mlofc_ros.bag.bagfile import BagError, BagMessage, BagReader, IMAGE_TYPE, message_class
 
@@ -79,15 +82,21 @@ class Player:
     """
 
     def __init__(self, node: Node, bag_path: str, *, topics: Optional[Sequence[str]] = None,
-                 remap: Optional[Dict[str, str]] = None, reliable: bool = False) -> None:
+                 remap: Optional[Dict[str, str]] = None, reliable: bool = False,
+                 strict: bool = False) -> None:
         self.node = node
         self.bag_path = bag_path
         self.remap = dict(remap or {})
+        self.strict = strict
         self.publishers: Dict[str, Publisher] = {}
         self.skipped_topics: List[str] = []
-        with BagReader(bag_path) as bag:
+        with BagReader(bag_path, strict=strict) as bag:
             available = bag.topics
             self.start_ns = bag.start_ns
+            if bag.incomplete:
+                node.get_logger().warning(
+                    f'{bag_path}: incomplete bag ({"; ".join(bag.problems)}); playing the '
+                    f'{bag.message_count} complete messages recovered from it')
         if topics:
             missing = sorted(set(topics) - set(available))
             if missing:
@@ -107,14 +116,14 @@ class Player:
         if not self.publishers:
             raise BagError(f'{bag_path}: nothing to play (no topic with an installed type)')
 
-    def wait_for_subscribers(self, timeout: float, sleep: Callable[[float], None] = time.sleep
-                             ) -> bool:
+    def wait_for_subscribers(self, timeout: float, sleep: Callable[[float], None] = time.sleep,
+                             should_stop: Callable[[], bool] = lambda: False) -> bool:
         """Wait up to ``timeout`` s until every publisher has a subscriber; True when all do."""
         deadline = time.monotonic() + timeout
         while True:
             if all(p.get_subscription_count() > 0 for p in self.publishers.values()):
                 return True
-            if time.monotonic() >= deadline:
+            if time.monotonic() >= deadline or should_stop():
                 return False
             sleep(0.05)
 
@@ -135,14 +144,16 @@ class Player:
         t_start = time.monotonic()
         while self.node.context.ok() and not should_stop():
             wall0 = time.monotonic()
-            with BagReader(self.bag_path) as bag:
+            with BagReader(self.bag_path, strict=self.strict) as bag:
                 for msg in bag.messages(self.publishers):
                     if not self.node.context.ok() or should_stop():
                         break
                     if rate > 0:
                         due = wall0 + (msg.timestamp_ns - self.start_ns) * 1e-9 / rate
-                        while (left := due - time.monotonic()) > 0:
+                        while (left := due - time.monotonic()) > 0 and not should_stop():
                             sleep(min(left, 0.1))
+                        if should_stop():
+                            break
                     self.publishers[msg.topic].publish(msg.rawdata)
                     stats.published[self.remap.get(msg.topic, msg.topic)] += 1
                     if after_publish is not None:
@@ -187,30 +198,39 @@ def play(bag_path: str, rate: float = 1.0, *, node: Optional[Node] = None,
          topics: Optional[Sequence[str]] = None, remap: Optional[Dict[str, str]] = None,
          loop: bool = False, start_delay: float = 0.0, wait_for_subscribers: float = 0.0,
          reliable: bool = False, executor: Optional[Executor] = None,
-         after_publish: Optional[Callable[[BagMessage], None]] = None) -> PlayStats:
-    """Play ``bag_path`` and return :class:`PlayStats`.
+         after_publish: Optional[Callable[[BagMessage], None]] = None, strict: bool = False,
+         should_stop: Callable[[], bool] = lambda: False) -> PlayStats:
+    """
+    Play ``bag_path`` and return :class:`PlayStats`.
 
     With ``node`` None a node ``mlofc_play`` is created (rclpy must be initialised) and
     destroyed afterwards. ``wait_for_subscribers`` waits up to that many seconds for every
     topic to have a subscriber, then ``start_delay`` more seconds. With ``executor``, waiting
-    spins it so subscribers in this process keep receiving. Raises ``BagError`` for an unreadable
-    bag or unknown topics.
+    spins it so subscribers in this process keep receiving. ``should_stop()`` ends waiting and
+    playback early. Raises ``BagError`` for an unreadable bag (or, with ``strict``, an
+    incomplete one) or unknown topics.
     """
     own = node is None
     node = node if node is not None else rclpy.create_node('mlofc_play')
     player = None
     try:
-        player = Player(node, bag_path, topics=topics, remap=remap, reliable=reliable)
+        player = Player(node, bag_path, topics=topics, remap=remap, reliable=reliable,
+                        strict=strict)
         sleep = spinning_sleep(executor) if executor is not None else time.sleep
         if wait_for_subscribers > 0 and not player.wait_for_subscribers(
-                wait_for_subscribers, sleep):
+                wait_for_subscribers, sleep, should_stop) and not should_stop():
             node.get_logger().warning(
                 f'not every topic has a subscriber after {wait_for_subscribers:g} s; playing')
-        if start_delay > 0:
-            sleep(start_delay)
-        stats = player.play(rate=rate, loop=loop, after_publish=after_publish, sleep=sleep)
-        player.flush()
-        sleep(0.1)  # let best-effort samples leave before the publishers go
+        deadline = time.monotonic() + start_delay
+        while (left := deadline - time.monotonic()) > 0 and not should_stop():
+            sleep(min(left, 0.1))
+        node.get_logger().info(f'playing {len(player.publishers)} topics of {bag_path} at '
+                               f'rate {rate:g}' + (' in a loop' if loop else ''))
+        stats = player.play(rate=rate, loop=loop, after_publish=after_publish, sleep=sleep,
+                            should_stop=should_stop)
+        if not should_stop():
+            player.flush()
+            sleep(0.1)  # let best-effort samples leave before the publishers go
         return stats
     finally:
         if player is not None:
@@ -237,11 +257,51 @@ def _parser() -> argparse.ArgumentParser:
                    help='wait up to S seconds for every topic to have a subscriber')
     p.add_argument('--reliable', action='store_true',
                    help='publish image topics with reliable QoS too')
+    p.add_argument('--strict', action='store_true',
+                   help='refuse an incomplete bag (cut short, not closed) instead of playing its '
+                        'complete messages with a warning')
     return p
 
 
+class StopRequest:
+    """
+    Turn SIGINT and SIGTERM into a request to stop (``requested``), checked between messages.
+
+    rclpy's own handler shuts the context down from another thread at once, so a publish that
+    is under way fails ("publisher's context is invalid"); ending the loop first and shutting
+    down afterwards does not race.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: Dict[int, Any] = {}
+
+    def __call__(self) -> bool:
+        return self.requested
+
+    def __enter__(self) -> 'StopRequest':
+        for sig in self.SIGNALS:
+            self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum: int, frame: Optional[FrameType]) -> None:
+        self.requested = True
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    """Entry point of ``mlofc_play``; returns the exit code (1 on a user error)."""
+    """
+    Entry point of ``mlofc_play``; return the exit code.
+
+    0: played (also when stopped by Ctrl-C or SIGTERM, as ``ros2 bag play``), 1: bad bag, 2: bad
+    arguments.
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     # only what follows --ros-args goes to rcl: ``--remap a:=b`` must not become a global remap
     split = argv.index('--ros-args') if '--ros-args' in argv else len(argv)
@@ -255,24 +315,26 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.rate < 0:
         print(f'mlofc_play: --rate must be >= 0, got {args.rate}', file=sys.stderr)
         return 2
-    rclpy.init(args=ros_args)
-    node = rclpy.create_node('mlofc_play')
-    try:
-        stats = play(args.bag, args.rate, node=node, topics=args.topics, remap=remap,
-                     loop=args.loop, start_delay=args.start_delay,
-                     wait_for_subscribers=args.wait_for_subscribers, reliable=args.reliable)
-        total = sum(stats.published.values())
-        print(f'mlofc_play: published {total} messages on {len(stats.published)} topics in '
-              f'{stats.wall_time:.2f} s', file=sys.stderr)
-        return 0
-    except BagError as exc:
-        print(f'mlofc_play: {exc}', file=sys.stderr)
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 130
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    with StopRequest() as stop:
+        rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            node = rclpy.create_node('mlofc_play')
+            try:
+                stats = play(args.bag, args.rate, node=node, topics=args.topics, remap=remap,
+                             loop=args.loop, start_delay=args.start_delay,
+                             wait_for_subscribers=args.wait_for_subscribers,
+                             reliable=args.reliable, strict=args.strict, should_stop=stop)
+            finally:
+                node.destroy_node()
+        except BagError as exc:
+            print(f'mlofc_play: {exc}', file=sys.stderr)
+            return 1
+        finally:
+            rclpy.try_shutdown()
+    total = sum(stats.published.values())
+    print(f'mlofc_play: {"stopped; " if stop.requested else ""}published {total} messages on '
+          f'{len(stats.published)} topics in {stats.wall_time:.2f} s', file=sys.stderr)
+    return 0
 
 
 if __name__ == '__main__':

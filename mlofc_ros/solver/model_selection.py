@@ -46,9 +46,17 @@ def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) 
     """
     n = res.n_bodies
     usable = dof > 0
-    best = np.nanmin(res.costs[usable], axis=1)
+    if not usable.any():
+        return np.inf   # nothing to explain: no model is better than another
+    # a track no body has a cost for (all NaN, e.g. degenerate for the general model) is not
+    # explained: +inf, capped at the outlier bound below like any unexplained track
+    costs = res.costs[usable]
+    best = (np.where(np.isnan(costs), np.inf, costs).min(axis=1) if costs.shape[1]
+            else np.full(len(costs), np.inf))
     if sigma is None:
-        sigma = max(noise_sigma(res.costs, res.labels, dof), 1e-9)
+        sigma = noise_sigma(res.costs, res.labels, dof)
+        sigma = sigma if np.isfinite(sigma) else 1.0
+        sigma = max(sigma, 1e-9)
     cap = chi2_quantile(OUTLIER_P, dof[usable]) * sigma ** 2
     rss = float(np.sum(np.minimum(best, cap)))
     rows = float(np.sum(dof))

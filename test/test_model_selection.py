@@ -1,0 +1,56 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Model selection's score on degenerate inputs: no numpy warning, a defined value."""
+import warnings
+
+import numpy as np
+
+from mlofc_ros.solver.model_selection import bic_score
+from mlofc_ros.solver.models import chi2_quantile
+from mlofc_ros.solver.result import SegmentationResult
+from mlofc_ros.solver.robust import OUTLIER_P
+
+
+def _result(costs, labels):
+    n = costs.shape[1]
+    return SegmentationResult(labels=np.asarray(labels), angular_velocities=np.zeros((n, 3)),
+                              angular_covariances=np.zeros((n, 3, 3)), focal_length=500.0,
+                              residuals=np.zeros(len(labels)), costs=costs, method='general')
+
+
+def test_track_without_any_cost_counts_as_unexplained():
+    """A track no body has a cost for (all NaN) costs the outlier bound, silently."""
+    rng = np.random.default_rng(0)
+    costs = rng.uniform(0.1, 2.0, (20, 2))
+    dof = np.full(20, 4.0)
+    labels = np.argmin(costs, axis=1)
+    capped = costs.copy()
+    capped[3] = 1e12                                   # far above the cap
+    costs[3] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        score = bic_score(_result(costs, labels), 1.0, dof)
+        assert score == bic_score(_result(capped, labels), 1.0, dof)
+        assert np.isfinite(score)
+        # with every cost missing the noise level falls back instead of becoming NaN
+        assert np.isfinite(bic_score(_result(np.full((20, 2), np.nan), labels), None, dof))
+    assert chi2_quantile(OUTLIER_P, dof[:1])[0] < 1e12
+
+
+def test_no_usable_track_scores_inf():
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        assert bic_score(_result(np.zeros((3, 1)), [0, 0, 0]), None, np.zeros(3)) == np.inf
+        assert bic_score(_result(np.zeros((0, 2)), []), None, np.zeros(0)) == np.inf
