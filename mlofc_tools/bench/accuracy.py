@@ -44,7 +44,8 @@ import mlofc_ros  # noqa: F401 (first of the package: one BLAS thread, set befor
 import numpy as np  # noqa: I100 (numpy must load after mlofc_ros, see above)
 
 from mlofc_tools.bench import common
-from mlofc_tools.synthetic import make_scene
+from mlofc_tools.scoring import best_permutation, motion_errors
+from mlofc_tools.synthetic import add_outliers, JITTER_PX, make_scene, MIXES
 
 FLOOR = 'floor (unweighted)'
 FLOOR_W = 'floor (weighted)'
@@ -57,10 +58,8 @@ COLORS = {'algebraic': 'C0', 'kmeans': 'C1', 'algebraic+kmeans': 'C2', 'robust':
 
 #: Lines per body of the paper's protocol (section 4.1: 20 for two bodies, 30 for three).
 LINES_PER_BODY = {1: 20, 2: 20, 3: 30, 4: 30}
-#: Fraction of tracks replaced by outliers, and the range of the jitter outliers (px).
+#: Fraction of tracks replaced by outliers.
 OUTLIER_FRACTION = 0.15
-MIXES = ('mixed', 'jitter', 'stitched')
-JITTER_PX = (10.0, 30.0)
 
 #: Goals of the accuracy issue.
 GOAL_FLOOR_RATIO = 1.00
@@ -113,55 +112,6 @@ Raw = Dict[Tuple[str, Tuple, str], List[Record]]
 
 # --------------------------------------------------------------------------------------------
 # scenes
-
-
-def add_outliers(tracks: np.ndarray, fraction: float, rng: np.random.Generator,
-                 mix: str = 'mixed') -> Tuple[np.ndarray, np.ndarray]:
-    """Replace a fraction of the tracks by tracks that follow no rigid motion.
-
-    *Jitter* outliers: every endpoint of every frame of the track moved by a distance uniform
-    in :data:`JITTER_PX` in a uniform direction, independently. *Stitched* outliers: frame ``k``
-    of the track is frame ``k`` of another line of the scene, a different line for every frame
-    (a tracker's association error). ``mix='mixed'`` makes half of the outliers (rounded up)
-    jitter and the others stitched; ``'jitter'`` or ``'stitched'`` only one kind.
-
-    Parameters
-    ----------
-    tracks : (N, K, 4) float
-        Line tracks (pixels).
-    fraction : float
-        Fraction of the tracks to replace (rounded to a whole number of tracks).
-    rng : numpy Generator
-    mix : {'mixed', 'jitter', 'stitched'}
-
-    Returns
-    -------
-    tracks : (N, K, 4) float64
-        A copy with the outliers in place.
-    kind : (N,) int64
-        0 = inlier (unchanged), 1 = jitter outlier, 2 = stitched outlier.
-    """
-    src = np.asarray(tracks, dtype=np.float64)
-    n_tracks, n_frames = src.shape[:2]
-    out = src.copy()
-    kind = np.zeros(n_tracks, dtype=np.int64)
-    m = int(round(fraction * n_tracks))
-    idx = rng.choice(n_tracks, size=m, replace=False)
-    if mix not in MIXES:
-        raise ValueError(f'mix must be one of {MIXES}, got {mix!r}')
-    n_jit = {'mixed': (m + 1) // 2, 'jitter': m, 'stitched': 0}[mix]
-    jit, sti = idx[:n_jit], idx[n_jit:]
-    mag = rng.uniform(JITTER_PX[0], JITTER_PX[1], size=(jit.size, n_frames, 2))
-    ang = rng.uniform(0.0, 2.0 * math.pi, size=mag.shape)
-    disp = np.stack([mag * np.cos(ang), mag * np.sin(ang)], axis=-1)  # (J, K, 2 ends, uv)
-    out[jit] += disp.reshape(jit.size, n_frames, 4)
-    kind[jit] = 1
-    for i in sti:  # a few tracks per scene: benchmark code, not the solver
-        others = rng.choice(n_tracks - 1, size=n_frames, replace=n_frames > n_tracks - 1)
-        others[others >= i] += 1
-        out[i] = src[others, np.arange(n_frames)]
-    kind[sti] = 2
-    return out, kind
 
 
 def _split_lines(total: int, n: int) -> List[int]:
@@ -232,11 +182,11 @@ def _score(labels: np.ndarray, w_est: Optional[np.ndarray], truth: np.ndarray,
     labels = np.asarray(labels, dtype=np.int64)
     n = w_true.shape[0]
     inl = np.ones(labels.shape[0], bool) if kind is None else kind == 0
-    perm, errors = common.best_permutation(labels[inl], truth[inl], n)
+    perm, errors = best_permutation(labels[inl], truth[inl], n)
     rec: Record = {'miscl': errors / max(int(inl.sum()), 1),
                    'unassigned': float(np.mean(labels < 0)),
                    'in_rej': float(np.mean(labels[inl] < 0)), 'failed': 0}
-    rec['rel'] = (common.motion_errors(w_est, w_true, perm)[0]
+    rec['rel'] = (motion_errors(w_est, w_true, perm)[0]
                   if w_est is not None and np.shape(w_est)[0] == n else math.nan)
     for name, code in (('out_rej', None), ('rej_jitter', 1), ('rej_stitched', 2)):
         sel = (~inl if code is None else kind == code) if kind is not None else np.zeros(0, bool)
@@ -270,7 +220,7 @@ def _run_fixed_n(tracks: np.ndarray, scene: object, runners: Sequence[str], seed
             w, err, cpu = _timed(lambda: _oracle_fit(tracks[inl], scene.labels[inl], n,
                                                      scene.intrinsics))
             rec = _failed(err, cpu) if err else {
-                'miscl': math.nan, 'rel': common.motion_errors(w, w_true, range(n))[0],
+                'miscl': math.nan, 'rel': motion_errors(w, w_true, range(n))[0],
                 'failed': 0, 'cpu': cpu}
             out[name] = rec
             continue
@@ -331,7 +281,7 @@ def run_task(task: Task) -> Tuple[Task, Dict[str, Record]]:
     if err:
         return task, {AUTO: dict(_failed(err, cpu), n_est=0)}
     n_true, n_est = scene.n_bodies, res.n_bodies
-    _, errors = common.best_permutation(res.labels, scene.labels, max(n_true, n_est))
+    _, errors = best_permutation(res.labels, scene.labels, max(n_true, n_est))
     return task, {AUTO: {'miscl': errors / scene.labels.shape[0], 'n_est': n_est,
                          'failed': 0, 'cpu': cpu}}
 

@@ -17,7 +17,6 @@ Everything here is free of ROS; matplotlib is imported lazily (Agg backend) by t
 """
 import argparse
 import datetime
-import itertools
 import math
 import multiprocessing
 import os
@@ -30,6 +29,9 @@ import time
 from typing import Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
+
+# re-exported: benchmarks score through common
+from mlofc_tools.scoring import best_permutation, misclassification, motion_errors  # noqa: F401
 
 #: ``docs/results`` of the source checkout this module lives in.
 REPO_RESULTS_DIR = pathlib.Path(__file__).resolve().parents[2] / 'docs' / 'results'
@@ -183,73 +185,6 @@ def time_call(fn: Callable[[], object], repeat: int = 5, warmup: int = 1) -> Dic
         times.append(time.perf_counter() - t0)
     t = np.asarray(times)
     return {'median': float(np.median(t)), 'min': float(t.min()), 'mean': float(t.mean())}
-
-
-def best_permutation(pred: np.ndarray, truth: np.ndarray, n_bodies: int
-                     ) -> Tuple[Tuple[int, ...], int]:
-    """Relabelling of predicted body ids that agrees best with the truth.
-
-    Parameters
-    ----------
-    pred : (N,) int
-        Predicted body ids, ``-1`` = unassigned (always counted wrong).
-    truth : (N,) int
-        True body ids ``0 .. n_bodies-1``.
-    n_bodies : int
-        Number of bodies (predicted ids ``>= n_bodies`` are counted wrong).
-
-    Returns
-    -------
-    perm : tuple of n_bodies ints
-        ``perm[p]`` is the true body matched to predicted body ``p``.
-    errors : int
-        Misclassified lines under ``perm``.
-    """
-    pred = np.asarray(pred, dtype=np.int64)
-    truth = np.asarray(truth, dtype=np.int64)
-    valid = (pred >= 0) & (pred < n_bodies)
-    conf = np.zeros((n_bodies, n_bodies), dtype=np.int64)  # conf[p, t]
-    np.add.at(conf, (pred[valid], truth[valid]), 1)
-    best, best_hits = tuple(range(n_bodies)), -1
-    for perm in itertools.permutations(range(n_bodies)):
-        hits = int(conf[np.arange(n_bodies), perm].sum())
-        if hits > best_hits:
-            best, best_hits = perm, hits
-    return best, int(pred.shape[0] - best_hits)
-
-
-def misclassification(pred: np.ndarray, truth: np.ndarray, n_bodies: int) -> float:
-    """Fraction of misclassified lines (0..1), minimised over relabellings; ``-1`` is wrong."""
-    _, errors = best_permutation(pred, truth, n_bodies)
-    return errors / max(int(np.asarray(truth).shape[0]), 1)
-
-
-def motion_errors(est: np.ndarray, truth: np.ndarray, perm: Sequence[int]
-                  ) -> Tuple[float, float]:
-    """Angular-velocity errors after matching bodies with ``perm``.
-
-    Parameters
-    ----------
-    est : (n, 3) estimated rotation vectors (rad/frame), row ``p`` = predicted body ``p``.
-    truth : (n, 3) true rotation vectors (rad/frame).
-    perm : ``perm[p]`` is the true body of predicted body ``p`` (:func:`best_permutation`).
-
-    Returns
-    -------
-    relative : float
-        Mean of ``|w_est - w_true| / |w_true|`` over the bodies that rotate (``|w_true| > 0``);
-        NaN when none does.
-    absolute_deg : float
-        Mean of ``|w_est - w_true|`` over all bodies, in degrees per frame.
-    """
-    est = np.asarray(est, dtype=np.float64)
-    truth = np.asarray(truth, dtype=np.float64)
-    matched = truth[list(perm)]
-    err = np.linalg.norm(est - matched, axis=1)
-    norm = np.linalg.norm(matched, axis=1)
-    rot = norm > 0
-    rel = float(np.mean(err[rot] / norm[rot])) if np.any(rot) else math.nan
-    return rel, float(np.degrees(err.mean()))
 
 
 def style_for(name: str, index: int) -> Dict[str, object]:

@@ -51,6 +51,7 @@ import numpy as np
 
 from mlofc_tools.bench import common
 from mlofc_tools.datasets import hopkins as hk
+from mlofc_tools.scoring import misclassification
 
 ORACLE = 'oracle (weighted)'
 ORACLE_U = 'oracle (unweighted)'
@@ -166,7 +167,7 @@ def _oracle(tracks: np.ndarray, labels: np.ndarray, n: int, size: Tuple[int, int
     t0, c0 = time.perf_counter(), time.process_time()
     try:
         res = segment_lines(tracks, n, intrinsics=intr, method='robust', seed=seed)
-        out[ROBUST_ORACLE_F] = {'miscl': common.misclassification(res.labels, labels, n),
+        out[ROBUST_ORACLE_F] = {'miscl': misclassification(res.labels, labels, n),
                                 'focal': f, 'unassigned': float(np.mean(res.labels < 0))}
     except ValueError as exc:
         out[ROBUST_ORACLE_F] = {'miscl': 1.0, 'focal': f, 'unassigned': 1.0, 'failed': 1,
@@ -267,7 +268,7 @@ def _general_diagnostics(tracks: np.ndarray, labels: np.ndarray, seq, res, seed:
     # and a search restarted from it, a cheaper truth start is a basin the search missed
     best = min(float(res.info['score']), float(again['score']))
     return {'truth_cheaper': float(sol['score'] < best),
-            'truth_start_miscl': common.misclassification(sol['labels'], labels, n)}
+            'truth_start_miscl': misclassification(sol['labels'], labels, n)}
 
 
 def run_unit(unit: Unit) -> List[Dict[str, object]]:
@@ -290,12 +291,12 @@ def run_unit(unit: Unit) -> List[Dict[str, object]]:
         try:
             res = segment_lines(tracks, seq.n_motions, intrinsics=None,
                                 image_size=seq.image_size, method=method, seed=unit.seed)
-            rec.update(miscl=common.misclassification(res.labels, labels, seq.n_motions),
+            rec.update(miscl=misclassification(res.labels, labels, seq.n_motions),
                        focal=float(res.focal_length), failed=0,
                        unassigned=float(np.mean(res.labels < 0)))
             full = np.where(res.labels >= 0, res.labels, np.argmin(
                 np.nan_to_num(res.costs, nan=np.inf), axis=1))
-            miscl_full = common.misclassification(full, labels, seq.n_motions)
+            miscl_full = misclassification(full, labels, seq.n_motions)
         except Exception as exc:  # noqa: B902 (a failing method is a result, not a crash)
             rec.update(miscl=1.0, focal=math.nan, failed=1, unassigned=1.0,
                        error=f'{type(exc).__name__}: {exc}')
@@ -310,7 +311,7 @@ def run_unit(unit: Unit) -> List[Dict[str, object]]:
         if method == 'robust' and not rec['failed']:
             loose, rec['truth_cheaper'] = _robust_diagnostics(tracks, labels, seq, res)
             records.append(dict(rec, method=method + LOOSE, seconds=math.nan, cpu=math.nan,
-                                miscl=common.misclassification(loose, labels, seq.n_motions),
+                                miscl=misclassification(loose, labels, seq.n_motions),
                                 unassigned=float(np.mean(loose < 0))))
         if method in WITH_OUTLIERS:
             records.append(dict(rec, method=method + REASSIGNED, miscl=miscl_full,

@@ -41,6 +41,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from mlofc_tools.bench import common
+from mlofc_tools.scoring import best_permutation, motion_errors
 from mlofc_tools.synthetic import make_scene
 
 FLOOR = 'floor (unweighted)'
@@ -133,9 +134,8 @@ def runner_names(exp: Experiment, n_frames: int, methods: Sequence[str],
 def _score(result: object, scene: object) -> Dict[str, float]:
     """Misclassification, motion errors and focal-length error of one solver result."""
     n = scene.n_bodies
-    perm, errors = common.best_permutation(result.labels, scene.labels, n)
-    rel, abs_deg = common.motion_errors(result.angular_velocities, scene.angular_velocities,
-                                        perm)
+    perm, errors = best_permutation(result.labels, scene.labels, n)
+    rel, abs_deg = motion_errors(result.angular_velocities, scene.angular_velocities, perm)
     # error of the true body n-1 (the pure-translation body of Fig. 4), deg/frame
     inv = {t: p for p, t in enumerate(perm)}
     last = float(np.degrees(np.linalg.norm(

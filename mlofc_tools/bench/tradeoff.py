@@ -46,6 +46,7 @@ import numpy as np
 
 from mlofc_tools.bench import common, frontend
 from mlofc_tools.bench.frontend import SWITCH_GOAL_PCT, TRACKED_GOAL
+from mlofc_tools.scoring import score_tracks
 
 #: Issue #7's speed goal: ``Pipeline.process`` / LSD alone, here on the means.
 SPEED_GOAL = 0.5
@@ -134,7 +135,7 @@ def run_setting(item: Tuple[Setting, int, Sequence[int], int]) -> Dict[str, obje
     for _label, rendered in tracking:
         out = frontend.run_tracker(lambda: make_tracker(params), rendered.frames,
                                    reference=False)
-        scores.append(frontend.score_tracks(out['ids'], out['segs'], rendered.truth))
+        scores.append(score_tracks(out['ids'], out['segs'], rendered.truth))
     return {'setting': setting, 'mean_ratio': float(cpu.mean() / lsd.mean()),
             'median_ratio': float(np.median(cpu) / np.median(lsd)),
             'mean_ms': float(cpu.mean()), 'median_ms': float(np.median(cpu)),
