@@ -18,7 +18,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from mlofc_tools.bench import accuracy
+from mlofc_tools.bench import accuracy, accuracy_report
 
 SECTION_TITLES = (
     '## Goals',
@@ -32,9 +32,9 @@ SECTION_TITLES = (
 
 def test_quick_run_writes_every_section(tmp_path: pathlib.Path) -> None:
     assert accuracy.main(['--quick', '--out', str(tmp_path)]) == 0
-    text = (tmp_path / 'accuracy.md').read_text()
+    text = (tmp_path / 'README.md').read_text()
     for title in SECTION_TITLES:
-        assert title in text, f'{title!r} missing from accuracy.md'
+        assert title in text, f'{title!r} missing from the report'
     # every section names the command that reruns it
     assert text.count('Command: `python -m mlofc_tools.bench accuracy --sections') == 5
     for name in ('floor', 'outliers', 'frames', 'speed'):
@@ -45,7 +45,7 @@ def test_quick_run_writes_every_section(tmp_path: pathlib.Path) -> None:
 def test_ratio_ci_is_paired_ratio_of_means() -> None:
     a = np.array([0.1, 0.2, 0.3, 0.0])
     b = np.array([0.2, 0.2, 0.2, 0.2])
-    val, lo, hi = accuracy.ratio_ci(a, b)
+    val, lo, hi = accuracy_report.ratio_ci(a, b)
     assert val == pytest.approx(0.75)
     assert lo <= val <= hi
-    assert np.isnan(accuracy.ratio_ci(a, np.zeros(4))[0])
+    assert np.isnan(accuracy_report.ratio_ci(a, np.zeros(4))[0])

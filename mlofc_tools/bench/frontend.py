@@ -11,10 +11,11 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Front-end benchmark: line detection and tracking on rendered and real sequences.
+"""
+Front-end benchmark: line detection and tracking on rendered and real sequences.
 
 Run ``python -m mlofc_tools.bench frontend`` (or ``python -m mlofc_tools.bench.frontend``); writes
-``docs/results/frontend.md`` and ``docs/results/frontend.png``.
+``README.md`` and ``frontend.png`` to ``docs/results/frontend/`` (or ``--out``).
 """
 import argparse
 from collections import defaultdict
@@ -79,7 +80,7 @@ def detector_candidates() -> List[Tuple[str, Dict[str, object]]]:
                   ('FLD (contrib) 0.5', {'backend': 'fld', 'scale': 0.5}),
                   ('EDLines (contrib) 1.0', {'backend': 'edlines', 'scale': 1.0})]
     # the backends as they are; the tracker's default detector (resize 0.8 + LSD + bridge)
-    # and full-resolution LSD + bridge (the default until session 10) as rows
+    # and full-resolution LSD + bridge (the former default) as rows
     cands = [(name, dict(kw, bridge=False)) for name, kw in cands]
     cands.insert(1, ('LSD scale 1.0 + bridge', {'backend': 'lsd', 'scale': 1.0, 'bridge': True}))
     cands.insert(4, ('resize 0.8 + LSD + bridge (tracker default)',
@@ -94,7 +95,8 @@ def _now() -> float:
 # ---------------------------------------------------------------------------------- detectors
 def bench_detectors(seqs: Sequence[Tuple[str, object]], every: int = 3,
                     repeat: int = 3) -> List[Dict[str, object]]:
-    """Recall / precision / accuracy / time of each detector candidate on rendered frames.
+    """
+    Recall / precision / accuracy / time of each detector candidate on rendered frames.
 
     Times are wall-clock medians over ``repeat`` passes, interleaved with the raw OpenCV LSD
     default (``cv2.createLineSegmentDetector()``) on the same frame as the reference.
@@ -143,7 +145,8 @@ def bench_detectors(seqs: Sequence[Tuple[str, object]], every: int = 3,
 # ---------------------------------------------------------------------------------- tracking
 def run_tracker(make: Callable[[], LineTracker], frames: Sequence[np.ndarray],
                 reference: bool = True) -> Dict[str, object]:
-    """Run a fresh tracker over ``frames``: outputs and per-frame stage times (s).
+    """
+    Run a fresh tracker over ``frames``: outputs and per-frame stage times (s).
 
     With ``reference`` the raw OpenCV LSD default runs on every frame first (same run, same
     frame) as the timing reference. Wall-clock (``total``, ``detect``, ``track``, ``ref``) and
@@ -179,7 +182,8 @@ TRACKED_GOAL, SWITCH_GOAL_PCT = 0.90, 1.0
 
 
 def pooled_score(scores: Sequence[Dict[str, float]], key: str, weight: str) -> float:
-    """Pool ``key`` of :func:`score_tracks` results over sequences, weighted by ``weight``.
+    """
+    Pool ``key`` of :func:`score_tracks` results over sequences, weighted by ``weight``.
 
     E.g. ``tracked_5`` by ``windows`` (every edge window of every sequence counts once),
     ``id_switch_pct`` by ``transitions``; NaN when no sequence has a finite value.
@@ -196,7 +200,8 @@ def meets_goal(score: Dict[str, float]) -> bool:
 
 
 def pooled_row(scores: Sequence[Dict[str, float]]) -> List[object]:
-    """Tracking-table row over all sequences: ``tracked 5`` and id switches pooled.
+    """
+    Tracking-table row over all sequences: ``tracked 5`` and id switches pooled.
 
     ``tracked 5`` over every (edge, 5-frame window) of every sequence, id switches over every
     transition; the other columns are means of the per-sequence values.
@@ -320,7 +325,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--contrib-json', default=None,
                     help='detector rows measured in another venv (--detectors-only output) '
                          'to include in the report')
-    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results/frontend)')
     return ap.parse_args(list(argv))
 
 
@@ -412,16 +417,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                           float(np.percentile(life, 90)) if life.size else float('nan'),
                           int(life.size)])
         time_rows.append(_time_row(label, run))
-    out_dir = common.results_dir(args.out)
     contrib_rows = []
     if args.contrib_json:
         contrib_rows = json.loads(pathlib.Path(args.contrib_json).read_text())
     report = build_report(args, argv, det_rows, contrib_rows, track_rows, real_rows,
                           time_rows, _now() - t_start, make())
-    (out_dir / 'frontend.md').write_text(report)
-    plot(out_dir / 'frontend.png', track_runs, survival)
-    print(report)
-    common.eprint(f'frontend: wrote {out_dir / "frontend.md"} in {_now() - t_start:.0f} s')
+    plot(common.results_dir('frontend', args.out) / 'frontend.png', track_runs, survival)
+    common.write_report('frontend', args.out, report)
     return 0
 
 
@@ -430,13 +432,13 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
                  track_rows: Sequence[Sequence[object]], real_rows: Sequence[Sequence[object]],
                  time_rows: Sequence[Sequence[object]], seconds: float,
                  tracker: LineTracker) -> str:
-    """Markdown report of the front-end benchmark."""
+    """Return the Markdown report of the front-end benchmark."""
     command = common.command_line('frontend', argv)
     det = tracker.detector
     lines = [common.run_header(
         'Front end: line detection and tracking', command,
-        {'OpenCV': f'{cv2.__version__}, cv2.setNumThreads(1); timings are wall-clock on a '
-                   'shared machine: compare against the LSD reference measured in the same run',
+        {'Threads': 'cv2.setNumThreads(1); timings are wall-clock on a shared machine: '
+                    'compare against the LSD reference measured in the same run',
          'Tracker': f'LineTracker(detect_every={tracker.detect_every}, '
                     f'detect_every_max={tracker.detect_every_max}, '
                     f'detect_regions={tracker.detect_regions}, '
@@ -445,6 +447,17 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
                     f'bridge={det.bridge}, bridge_join={det.bridge_join}, '
                     f'lsd_bins={det.lsd_bins})',
          'Run time': f'{seconds:.0f} s'})]
+    lines += _detector_section(det_rows, contrib_rows)
+    lines += _tracking_section(track_rows, real_rows)
+    lines += _time_section(time_rows, tracker)
+    lines += ['![frontend](frontend.png)', '']
+    return '\n'.join(lines)
+
+
+def _detector_section(det_rows: Sequence[Dict[str, object]],
+                      contrib_rows: Sequence[Dict[str, object]]) -> List[str]:
+    """Return the report's lines on the detectors, and why the tracker's is chosen."""
+    lines: List[str] = []
     lines += ['## Detectors on rendered frames', '',
               'Every 3rd frame of the rendered sequences below. A detection matches a GT edge '
               'when within 3 deg, both ends of its overlap within 2 px of the GT line and at '
@@ -465,8 +478,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               'missed edge for several frames. '
               'LSD at full resolution (`scale=1.0`) has the best recall and the lowest line '
               'error of all candidates, at about 2x the cost of the OpenCV default. On the '
-              'image resized by 0.8 (area average, `lsd_resize`: the tracker default since '
-              'session 10) LSD detects fewer edges per call but it is cheaper, and in the '
+              'image resized by 0.8 (area average, `lsd_resize`: the tracker default) LSD '
+              'detects fewer edges per call but it is cheaper, and in the '
               'tracker, which refines and grows the lines it carries, it tracks as many edges '
               'as LSD 1.0 (the tracking table below; render seeds 0-9 in the docstring of '
               '`LineDetector`); the Gaussian sub-sampling of LSD itself at 0.8 tracks about 1 '
@@ -475,15 +488,23 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               'a tenth of the edges and doubles the line error. The contrib detectors (FLD, '
               'EDLines) are 2.5-3x cheaper than the LSD default, with recall per call between '
               'LSD 0.8 and LSD 0.5 and 2-3x the line error of LSD 1.0. In the tracker with '
-              '`bridge_crossings` (session 11), FLD at full resolution tracks about as many '
+              '`bridge_crossings`, FLD at full resolution tracks about as many '
               'edges as the default (`tracked 5` / id switches, render seeds 0-3: 0.930 / '
-              '0.52% vs 0.937 / 0.53%, `frontend_fld/`; seeds 4-9: 0.937 / 0.48% vs 0.931 / '
+              '0.52% vs 0.937 / 0.53%, `--backend fld --scale 1.0`; seeds 4-9: 0.937 / 0.48% '
+              'vs 0.931 / '
               '0.52%) for about a third less front-end CPU per frame (mean), with ~30% larger '
               'line errors, about twice the endpoint error, own_centre s0 at 1.29% id '
               'switches and 10-15% fewer segments on two of the real sequences; the node '
               'offers it as `detector_backend:=fld` (with `detector_scale:=1.0`; it needs '
               'opencv-contrib-python-headless in place of opencv-python-headless). Without '
               '`bridge_crossings` FLD and EDLines track 5 points fewer edges.', '']
+    return lines
+
+
+def _tracking_section(track_rows: Sequence[Sequence[object]],
+                      real_rows: Sequence[Sequence[object]]) -> List[str]:
+    """Return the report's lines on tracking, rendered (scored) and real sequences."""
+    lines: List[str] = []
     lines += ['## Tracking on rendered sequences (640x480, background + boxes)', '',
               '`tracked 5` = share of (GT edge >= 30 px, 5 consecutive frames in which it is '
               'visible) with one track id on the edge in all 5 frames. `id switch` = % of '
@@ -518,6 +539,12 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               common.markdown_table(
                   ['sequence', 'segments / frame', 'track lifetime median (frames)',
                    'lifetime p90', 'tracks'], real_rows)]
+    return lines
+
+
+def _time_section(time_rows: Sequence[Sequence[object]], tracker: LineTracker) -> List[str]:
+    """Return the report's lines on the time per frame, against the LSD reference."""
+    lines: List[str] = []
     lines += ['## Time per frame (one thread)', '',
               'Wall-clock ms per frame on a shared 2-core machine, so read them against '
               '`LSD ref`: the raw OpenCV LSD default (`cv2.createLineSegmentDetector()`) run on '
@@ -531,8 +558,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
                    'total median', 'total p95', 'total mean', 'LSD ref median',
                    'median / LSD', 'mean / LSD', 'CPU total median', 'CPU total mean',
                    'CPU LSD ref'], time_rows)]
-    lines += ['![frontend](frontend.png)', '']
-    return '\n'.join(lines)
+    return lines
 
 
 if __name__ == '__main__':

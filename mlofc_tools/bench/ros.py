@@ -27,7 +27,8 @@ waits for the node to drain, and counts the ``~/segments`` messages received (re
 Latency = reception wall time - image stamp (both clocks of this process). A rate is kept up
 with when every published frame is answered and the node dropped none.
 
-Run ``python -m mlofc_tools.bench ros``; writes ``ros.md`` and ``ros.png``.
+Run ``python -m mlofc_tools.bench ros``; writes ``README.md`` and ``ros.png`` to
+``docs/results/ros/``.
 """
 import argparse
 import contextlib
@@ -177,7 +178,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--domain-id', type=int, default=None)
     ap.add_argument('--quick', action='store_true',
                     help='smoke run: 5 and 10 Hz, 4 frames of 320x240')
-    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results/ros)')
     args = ap.parse_args(list(argv))
     if args.quick:
         args.rates, args.frames, args.size = '5,10', 4, '320x240'
@@ -303,12 +304,11 @@ def _wait(cond: Any, timeout: float, step: float = 0.05) -> bool:
 
 def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
     """Start the node, sweep the rates; returns the per-rate rows and run facts."""
-    from mlofc_tools.demo import fresh_domain_id
+    from mlofc_tools.demo_node import fresh_domain_id
     from mlofc_tools.render import render_sequence
 
     load = os.getloadavg()
-    from mlofc_tools.bench.pipeline import code_revisions
-    code = code_revisions()
+    code = common.commit()            # before the node imports the code
     domain = args.domain_id if args.domain_id is not None else fresh_domain_id()
     common.eprint(f'ros: rendering {args.frames} frames {args.wh[0]}x{args.wh[1]}')
     seq = render_sequence(args.boxes, min(args.frames, 120), size=args.wh,
@@ -347,7 +347,7 @@ def running_node(ros_args: Sequence[str], domain: int, stats_path: pathlib.Path,
     this process's environment set to the domain). Raises :class:`BenchError` when the node
     does not come up in ``startup_timeout`` s. The environment is restored afterwards.
     """
-    from mlofc_tools.demo import NodeProcess
+    from mlofc_tools.demo_node import NodeProcess
     command = [sys.executable, '-m', 'mlofc_tools.bench.ros', '--child', str(stats_path),
                '--ros-args', '-r', f'__node:={NODE_NAME}', '-r', f'image:={IMAGE_TOPIC}',
                '-r', f'camera_info:={INFO_TOPIC}', *ros_args]
@@ -494,10 +494,9 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
          'Input': f'{args.wh[0]}x{args.wh[1]} rendered boxes + background, mono8, '
                   f'{args.frames} frames per rate, sensor-data QoS, CameraInfo before each '
                   'image; 4 warm-up frames at 2 Hz not counted',
-         'Code (at start)': res['code'],
          'Wall time': f'{wall:.0f} s on a shared 2-core machine (bench and node compete for it)',
          'Load average (1 min) at start / end':
-             f'{res["load"][0]:.1f} / {os.getloadavg()[0]:.1f}'})
+             f'{res["load"][0]:.1f} / {os.getloadavg()[0]:.1f}'}, res['code'])
     fastest = max((r['out_rate'] for r in rows if math.isfinite(r['out_rate'])),
                   default=math.nan)
     lines = [head, '## Headline', '', rate_headline(rows)]
@@ -554,7 +553,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             rest = rest[1:]
         return child_main(argv[1], rest)
     args = parse_args(argv)
-    out = common.results_dir(args.out)
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix='mlofc_bench_ros_') as tmp:
         try:
@@ -563,9 +561,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             print(f'bench ros: error: {exc}', file=sys.stderr)
             return 1
     report = build_report(args, argv, res, time.monotonic() - t0)
-    plot(out / 'ros.png', res['rows'])
-    (out / 'ros.md').write_text(report)
-    print(report)
+    plot(common.results_dir('ros', args.out) / 'ros.png', res['rows'])
+    common.write_report('ros', args.out, report)
     return 0
 
 

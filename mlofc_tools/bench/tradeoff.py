@@ -13,8 +13,8 @@
 # limitations under the License.
 """Speed against tracking quality over the front end's settings: which goal costs which.
 
-Run ``python -m mlofc_tools.bench tradeoff``; writes ``docs/results/tradeoff.md`` and
-``tradeoff.png``. For every combination of the node parameters ``detector_scale``,
+Run ``python -m mlofc_tools.bench tradeoff``; writes ``README.md`` and ``tradeoff.png`` to
+``docs/results/tradeoff/``. For every combination of the node parameters ``detector_scale``,
 ``detect_every``, ``bridge_crossings`` and ``detect_every_max`` (``fixed`` = ``detect_every``, a
 fixed rate; a larger value is detection on demand; the rest at their defaults):
 
@@ -69,7 +69,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--timing-frames', type=int, default=60,
                     help='frames of the timed sequence (the first `window` are not counted)')
     ap.add_argument('--jobs', type=int, default=1, help='settings run in this many processes')
-    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results/tradeoff)')
     return ap.parse_args(list(argv))
 
 
@@ -216,7 +216,6 @@ def build_report(argv: Sequence[str], records: Sequence[Dict[str, object]],
         'Speed vs tracking quality over the front-end settings',
         common.command_line('tradeoff', argv),
         {'Threads': 'single (`cv2.setNumThreads(1)`, one BLAS thread); CPU time per thread',
-         'Code': common.git_revision('mlofc_ros'),
          'Wall time': f'{seconds:.0f} s'})
     fast = [r for r in records if r['mean_ratio'] <= SPEED_GOAL]
     good = [r for r in records if frontend.meets_goal(r)]
@@ -256,12 +255,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     t0 = time.monotonic()
     records = common.run_parallel(run_setting, items, args.jobs, what='settings',
                                   reports=len(items))
-    out = common.results_dir(args.out)
-    plot(out / 'tradeoff.png', records)
-    text = build_report(argv, records, time.monotonic() - t0)
-    (out / 'tradeoff.md').write_text(text)
-    print(text)
-    common.eprint(f'wrote {out / "tradeoff.md"} and {out / "tradeoff.png"}')
+    plot(common.results_dir('tradeoff', args.out) / 'tradeoff.png', records)
+    common.write_report('tradeoff', args.out, build_report(argv, records, time.monotonic() - t0))
     return 0
 
 
