@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""``python -m mlofc_tools.demo`` (``make demo``): the node, end to end, on a rendered bag.
+"""
+``python -m mlofc_tools.demo`` (``make demo``): the node, end to end, on a rendered bag.
 
 1. Render boxes rotating about the camera centre in front of a static striped wall (2 boxes +
    background = 3 bodies, 640x480, 60 frames at 30 Hz, known angular velocities and edges).
@@ -63,7 +64,8 @@ def point_segment_distance(points: np.ndarray, segments: np.ndarray) -> np.ndarr
 
 def match_segments(detected: np.ndarray, truth: np.ndarray,
                    tolerance: float = MATCH_TOLERANCE_PX) -> np.ndarray:
-    """Index (M,) of the true edge each detected segment lies on, ``-1`` when none does.
+    """
+    Index (M,) of the true edge each detected segment lies on, ``-1`` when none does.
 
     ``detected`` (M, 4) and ``truth`` (L, 4) are ``(u1, v1, u2, v2)`` pixels. A detection lies
     on an edge when both endpoints are within ``tolerance`` px of it (detections are often
@@ -82,7 +84,8 @@ def match_segments(detected: np.ndarray, truth: np.ndarray,
 
 
 def match_bodies(confusion: np.ndarray) -> Dict[int, int]:
-    """Map node labels (rows) to true bodies (columns) maximising the total overlap.
+    """
+    Map node labels (rows) to true bodies (columns) maximising the total overlap.
 
     ``confusion[i, g]`` counts segments with label ``i`` on body ``g``. Exhaustive over
     assignments (a handful of bodies); labels left without a body (or with no overlap) are
@@ -133,7 +136,8 @@ class Evaluation:
 
 
 def evaluate(seq: Any, collected: Collected, warmup: int) -> Evaluation:
-    """Score ``collected`` against the rendered sequence ``seq`` (frames ``>= warmup`` only).
+    """
+    Score ``collected`` against the rendered sequence ``seq`` (frames ``>= warmup`` only).
 
     Label accuracy: among detections lying on a true edge and carrying a label, the share
     whose label maps (by :func:`match_bodies`) to the edge's body. ``assigned_fraction``: share
@@ -183,7 +187,8 @@ def strip_frames(n_frames: int, warmup: int, count: int = 4) -> List[int]:
 
 def render_strip(seq: Any, collected: Collected, frames: Sequence[int],
                  scale: Optional[float] = None) -> np.ndarray:
-    """BGR strip (uint8) of ``frames`` with the node's segments drawn by body (draw_debug).
+    """
+    BGR strip (uint8) of ``frames`` with the node's segments drawn by body (draw_debug).
 
     ``scale`` resizes each tile (default: half size for images 600 px wide or more).
     """

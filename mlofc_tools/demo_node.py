@@ -188,25 +188,8 @@ def run_node(bag_path: Path, cfg: DemoConfig, workdir: Path,
                 os.environ[k] = v
 
 
-def _run_node(bag_path: Path, cfg: DemoConfig, workdir: Path, domain: int,
-              log: Any) -> Collected:
-    env = dict(os.environ, PYTHONUNBUFFERED='1')
-
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from geometry_msgs.msg import TwistWithCovarianceStamped
-    from sensor_msgs.msg import PointCloud2
-
-    from mlofc_ros.bag.bagfile import BagReader, deserialize
-    from mlofc_ros.bag.player import Player
-    from mlofc_ros.ros_messages import parse_segments_msg, parse_twist_msg
-
-    with BagReader(bag_path) as bag:
-        stamps = [deserialize(m.rawdata, m.msgtype).header.stamp
-                  for m in bag.messages([IMAGE_TOPIC])]
-    frame_of = {(s.sec, s.nanosec): i for i, s in enumerate(stamps)}
-
+def _node_command_line(cfg: DemoConfig) -> List[str]:
+    """Return the node's command line: remappings and the parameters ``cfg`` sets."""
     params = {'num_bodies': cfg.num_bodies}
     if cfg.method:
         params['method'] = cfg.method
@@ -216,14 +199,18 @@ def _run_node(bag_path: Path, cfg: DemoConfig, workdir: Path, domain: int,
                                 '-r', f'image:={IMAGE_TOPIC}', '-r', f'camera_info:={INFO_TOPIC}']
     for k, v in params.items():
         command += ['-p', f'{k}:={v}']
-    collected = Collected(node_command=command, domain_id=domain)
-    sent_at: Dict[int, float] = {}
+    return command
 
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    node = rclpy.create_node('mlofc_demo', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
+
+def _subscribe(node: Any, num_bodies: int, frame_of: Dict[Tuple[int, int], int],
+               collected: Collected, sent_at: Dict[int, float]) -> str:
+    """Collect the node's segments and twists into ``collected``; return the segments topic."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from geometry_msgs.msg import TwistWithCovarianceStamped
+    from sensor_msgs.msg import PointCloud2
+
+    from mlofc_ros.ros_messages import parse_segments_msg, parse_twist_msg
+
     qos = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
 
     def on_segments(msg: PointCloud2) -> None:
@@ -243,9 +230,37 @@ def _run_node(bag_path: Path, cfg: DemoConfig, workdir: Path, domain: int,
 
     seg_topic = f'/{NODE_NAME}/segments'
     node.create_subscription(PointCloud2, seg_topic, on_segments, qos)
-    for i in range(cfg.num_bodies):
+    for i in range(num_bodies):
         node.create_subscription(TwistWithCovarianceStamped, f'/{NODE_NAME}/body_{i}/twist',
                                  lambda m, i=i: on_twist(i, m), qos)
+    return seg_topic
+
+
+def _run_node(bag_path: Path, cfg: DemoConfig, workdir: Path, domain: int,
+              log: Any) -> Collected:
+    """Run the node on ``domain`` and play ``bag_path`` into it (see :func:`run_node`)."""
+    env = dict(os.environ, PYTHONUNBUFFERED='1')
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from mlofc_ros.bag.bagfile import BagReader, deserialize
+    from mlofc_ros.bag.player import Player
+
+    with BagReader(bag_path) as bag:
+        stamps = [deserialize(m.rawdata, m.msgtype).header.stamp
+                  for m in bag.messages([IMAGE_TOPIC])]
+    frame_of = {(s.sec, s.nanosec): i for i, s in enumerate(stamps)}
+    command = _node_command_line(cfg)
+    collected = Collected(node_command=command, domain_id=domain)
+    sent_at: Dict[int, float] = {}
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node('mlofc_demo', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    seg_topic = _subscribe(node, cfg.num_bodies, frame_of, collected, sent_at)
 
     def spin_for(seconds: float) -> None:
         deadline = time.monotonic() + seconds

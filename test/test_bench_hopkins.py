@@ -29,8 +29,8 @@ def test_window_starts_and_codes() -> None:
     assert hopkins_runs.window_starts(29, 2, 3) == [0, 14, 27]
     assert hopkins_runs.window_starts(29, 5, 1) == [12]
     assert hopkins_runs.window_starts(4, 5, 3) == []
-    assert hopkins_runs.checkerboard_motion('1R2RC_g12') == {'objects': 'R,R', 'camera': 'fixed',
-                                                      'translation': 'no'}
+    assert hopkins_runs.checkerboard_motion('1R2RC_g12') == {
+        'objects': 'R,R', 'camera': 'fixed', 'translation': 'no'}
     assert hopkins_runs.checkerboard_motion('2T3RCRTP')['camera'] == 'RTP'
     assert hopkins_runs.checkerboard_motion('three-cars') is None
 
@@ -73,8 +73,9 @@ def test_general_diagnostics_plumbing() -> None:
     """
     from mlofc_ros.solver import segment_lines
     seq = hk.load_sequence(DATA / 'two_cranes.npz')
-    tracks, labels = hk.line_tracks(seq, hopkins_runs.LINES_PER_MOTION, (0, 5), hopkins_runs.MIN_LENGTH_PX,
-                                    seed=3, max_uses=hopkins_runs.MAX_USES)
+    tracks, labels = hk.line_tracks(seq, hopkins_runs.LINES_PER_MOTION, (0, 5),
+                                    hopkins_runs.MIN_LENGTH_PX, seed=3,
+                                    max_uses=hopkins_runs.MAX_USES)
     res = segment_lines(tracks, seq.n_motions, image_size=seq.image_size, method='general',
                         seed=3)
     assert np.isfinite(res.info['score'])

@@ -20,7 +20,7 @@ from mlofc_tools.synthetic import add_outliers, make_scene, MIXES, rotation_matr
 
 
 def _normals(tracks: np.ndarray, intrinsics) -> np.ndarray:
-    """Unit interpretation-plane normals (N, K, 3) of pixel segments (N, K, 4)."""
+    """Return the unit interpretation-plane normals (N, K, 3) of pixel segments (N, K, 4)."""
     fx, fy, cx, cy = intrinsics
     p = tracks.reshape(tracks.shape[0], tracks.shape[1], 2, 2)
     x = np.stack([(p[..., 0] - cx) / fx, (p[..., 1] - cy) / fy, np.ones(p.shape[:-1])], axis=-1)

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Spinning boxes through the running node in real time: a slow solver at camera rates.
+"""
+Spinning boxes through the running node in real time: a slow solver at camera rates.
 
 Run ``python -m mlofc_tools.bench live``; writes ``docs/results/live/``. Where ``bench
 spinning`` feeds every frame to :class:`~mlofc_ros.pipeline.Pipeline` and waits for each

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The paper's synthetic experiments (section 4.1, Fig. 2-5), rerun for every solver method.
+"""
+The paper's synthetic experiments (section 4.1, Fig. 2-5), rerun for every solver method.
 
 ``python -m mlofc_tools.bench paper [--trials 50] [--quick] [--out DIR] [--jobs 2]`` writes
 ``README.md`` and ``paper_fig2.png`` .. ``paper_fig5.png`` to ``docs/results/paper/`` (or
@@ -117,7 +118,8 @@ class Unit:
 
 def runner_names(exp: Experiment, n_frames: int, methods: Sequence[str],
                  multi: Sequence[str] = MULTI_FRAME_METHODS) -> Tuple[str, ...]:
-    """Names of what runs on a scene: methods, floors and (Fig. 2, two views) f-unknown runs.
+    """
+    Names of what runs on a scene: methods, floors and (Fig. 2, two views) f-unknown runs.
 
     ``methods`` run on two-view scenes, those of them also in ``multi`` on K-view scenes.
     """

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Per-stage timings of the per-frame pipeline, against OpenCV's LSD alone on the same frames.
+"""
+Per-stage timings of the per-frame pipeline, against OpenCV's LSD alone on the same frames.
 
 For every frame of every sequence, in this order and single-threaded (``cv2.setNumThreads(1)``,
 one BLAS thread): decode a ``sensor_msgs/Image``-like object (mono8, and bgr8 separately) with
@@ -118,7 +119,8 @@ def image_message(img: np.ndarray, encoding: str) -> SimpleNamespace:
 
 def run_sequence(seq: Sequence_, params: Optional[Dict[str, object]] = None
                  ) -> Dict[str, np.ndarray]:
-    """Time every stage on every frame of ``seq``; returns ms arrays per key (one per frame).
+    """
+    Time every stage on every frame of ``seq``; returns ms arrays per key (one per frame).
 
     ``params``: :class:`Pipeline` parameters (node names) on top of the defaults.
 
@@ -175,7 +177,8 @@ def run_sequence(seq: Sequence_, params: Optional[Dict[str, object]] = None
 
 def count_calls(seq: Sequence_, params: Optional[Dict[str, object]] = None
                 ) -> Dict[str, np.ndarray]:
-    """Python-level calls per frame of ``Pipeline.process`` on ``seq`` (cProfile's count).
+    """
+    Python-level calls per frame of ``Pipeline.process`` on ``seq`` (cProfile's count).
 
     Every function call the profiler sees, numpy's and OpenCV's C functions included: at the
     pipeline's sizes each costs mostly its fixed overhead, so the count is the part of a
@@ -277,7 +280,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
 
 def plot(path: 'os.PathLike', names: Sequence[str], med: Dict[str, Dict[str, float]],
          estimated_f: Sequence[bool]) -> None:
-    """Stacked bars of the median stage times per sequence, LSD alone next to each.
+    """
+    Stacked bars of the median stage times per sequence, LSD alone next to each.
 
     Sequences with a known camera and those whose focal length is estimated (much slower
     solver) go on separate panels, each with its own scale.

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The running node under rising image rates: drops, throughput and latency over DDS.
+"""
+The running node under rising image rates: drops, throughput and latency over DDS.
 
 ``mlofc_node`` runs in its own process on a fresh ``ROS_DOMAIN_ID`` (localhost discovery). It is
 started through a thin wrapper (``python -m mlofc_tools.bench.ros --child STATS -- --ros-args
@@ -70,7 +71,8 @@ def proc_times_path(stats_path: Union[str, pathlib.Path]) -> str:
 
 def read_proc_times(stats_path: Union[str, pathlib.Path], start: int, stop: int
                     ) -> Tuple[np.ndarray, np.ndarray]:
-    """Return the process wall and CPU ms (each ``(stop - start,)`` at most) of solved frames.
+    """
+    Return the process wall and CPU ms (each ``(stop - start,)`` at most) of solved frames.
 
     Frames ``start .. stop - 1`` in the order the node solved them (``n_proc`` of two stats
     dumps); empty before the node has written any.
@@ -84,7 +86,8 @@ def read_proc_times(stats_path: Union[str, pathlib.Path], start: int, stop: int
 
 
 def child_main(stats_path: str, ros_args: Sequence[str]) -> int:
-    """Run ``MlofcNode`` like ``mlofc_node`` does, dumping ``node.stats`` to ``stats_path``.
+    """
+    Run ``MlofcNode`` like ``mlofc_node`` does, dumping ``node.stats`` to ``stats_path``.
 
     The process time of every solved frame is appended to :func:`proc_times_path` as it is
     dumped: a JSON dump of the whole history every 0.1 s took the executor thread about a
@@ -340,7 +343,8 @@ def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
 def running_node(ros_args: Sequence[str], domain: int, stats_path: pathlib.Path,
                  log_path: pathlib.Path, make_bench: Callable[[], Bench],
                  startup_timeout: float) -> Iterator[Tuple[Bench, Any, float, List[str]]]:
-    """Run the node (``--child``, writing ``stats_path``) on ``domain`` with ``ros_args``.
+    """
+    Run the node (``--child``, writing ``stats_path``) on ``domain`` with ``ros_args``.
 
     Yields ``(bench, process, startup seconds, command)`` once the node subscribes to the
     image topic and publishes ``~/segments``; ``make_bench`` builds the publishing side (in
@@ -439,7 +443,8 @@ def kept_up(row: Dict[str, Any]) -> bool:
 
 
 def rate_headline(rows: Sequence[Dict[str, Any]]) -> str:
-    """Headline line: the highest rate kept up with, at it and every lower rate (rising rows).
+    """
+    Headline line: the highest rate kept up with, at it and every lower rate (rising rows).
 
     When the node keeps up with every rate run, the limit is above the highest: the line says
     so instead of calling that rate the limit.

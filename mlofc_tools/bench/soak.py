@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Soak test: many frames through one :class:`~mlofc_ros.pipeline.Pipeline`, memory watched.
+"""
+Soak test: many frames through one :class:`~mlofc_ros.pipeline.Pipeline`, memory watched.
 
 A rendered sequence (``--boxes`` boxes + background, ``--size``, ``--loop`` frames) is played in
 a loop with monotonic stamps (1/30 s apart, so every loop is a jump in the image the tracker
@@ -36,7 +37,8 @@ from mlofc_tools.bench import common
 
 
 def rss_mb(field: str = 'VmRSS') -> float:
-    """Resident memory of this process from ``/proc/self/status`` (MB = 2**20 bytes).
+    """
+    Resident memory of this process from ``/proc/self/status`` (MB = 2**20 bytes).
 
     ``field`` is ``VmRSS`` (now) or ``VmHWM`` (peak). NaN where ``/proc`` is missing.
     """

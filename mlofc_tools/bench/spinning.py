@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Spinning boxes through the whole pipeline: rotation-only ('robust') vs 'general'.
+"""
+Spinning boxes through the whole pipeline: rotation-only ('robust') vs 'general'.
 
 Run ``python -m mlofc_tools.bench spinning``; writes ``README.md`` and ``spinning.png`` to
 ``docs/results/spinning/``. Rendered boxes spinning about their own centres (``own_centre``, so
@@ -63,7 +64,8 @@ SCENES = {
 
 def run_pipeline(seq, method: str, window: int, params: Optional[Dict[str, object]] = None
                  ) -> List[Tuple[object, float]]:
-    """``(FrameResult, CPU ms)`` of every frame of ``seq`` through a fresh pipeline.
+    """
+    ``(FrameResult, CPU ms)`` of every frame of ``seq`` through a fresh pipeline.
 
     ``params``: other :class:`Pipeline` parameters (node names) on top of the defaults.
     """
@@ -87,7 +89,8 @@ def _mapped(lab: np.ndarray, mapping: Dict[int, int], n_lab: int) -> np.ndarray:
 
 
 def score_run(seq, outs: Sequence[Tuple[object, float]], first: int) -> Dict[str, object]:
-    """Scores of a run (frames ``>= first``), see the module docstring.
+    """
+    Scores of a run (frames ``>= first``), see the module docstring.
 
     Returns ``wrong``, ``unassigned``, ``wrong_frame`` (fractions of ``matched``),
     ``omega_err`` (per true body, relative; NaN for static bodies), ``los_err`` (per body),
@@ -192,7 +195,8 @@ def build_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
 
 
 def summary_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
-    """One row per (scene, method, window) over its seeds: means and the omega errors.
+    """
+    One row per (scene, method, window) over its seeds: means and the omega errors.
 
     Single runs are chaotic (a body that one frame fits in the wrong basin keeps it through
     the warm starts), so the goals are read on these rows.

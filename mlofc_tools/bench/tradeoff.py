@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Speed against tracking quality over the front end's settings: which goal costs which.
+"""
+Speed against tracking quality over the front end's settings: which goal costs which.
 
 Run ``python -m mlofc_tools.bench tradeoff``; writes ``README.md`` and ``tradeoff.png`` to
 ``docs/results/tradeoff/``. For every combination of the node parameters ``detector_scale``,
@@ -74,7 +75,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def settings(args: argparse.Namespace) -> List[Setting]:
-    """Every combination of the ``--scales``, ``--every``, ``--bridge`` and ``--max`` values.
+    """
+    Every combination of the ``--scales``, ``--every``, ``--bridge`` and ``--max`` values.
 
     An on-demand maximum not above ``detect_every`` is the fixed rate, listed once.
     """
@@ -104,7 +106,8 @@ def setting_text(setting: Setting) -> str:
 
 @functools.lru_cache(maxsize=2)
 def _sequences(frames: int, seeds: Tuple[int, ...], timing_frames: int) -> Tuple[object, list]:
-    """Render the timed sequence and the tracking sequences, once per process.
+    """
+    Render the timed sequence and the tracking sequences, once per process.
 
     Every setting runs on the same frames; rendering them is about a quarter of a setting's
     time, so a worker keeps them.
