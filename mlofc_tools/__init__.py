@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Tools around the mlofc_ros library: benchmarks, the renderer, synthetic scenes, datasets, the demo.
+"""
+Tools around the mlofc_ros library: benchmarks, the renderer, synthetic scenes, datasets, the demo.
 
 The runtime package ``mlofc_ros`` never imports this one. It is run from a checkout
 (``python -m mlofc_tools.bench NAME``, ``python -m mlofc_tools.demo``) and is not installed.

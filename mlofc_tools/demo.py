@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""``python -m mlofc_tools.demo`` (``make demo``): the node, end to end, on a rendered bag.
+"""
+``python -m mlofc_tools.demo`` (``make demo``): the node, end to end, on a rendered bag.
 
 1. Render boxes rotating about the camera centre in front of a static striped wall (2 boxes +
    background = 3 bodies, 640x480, 60 frames at 30 Hz, known angular velocities and edges).
@@ -23,21 +24,16 @@
 4. Score against the ground truth: detected segments are matched to true edges by endpoint
    distance, node body ids to true bodies by label overlap; print each body's angular velocity
    (deg/s) next to the truth and the label accuracy, and write ``demo_strip.png`` (frames with
-   segments coloured by body) and ``demo.md`` to the output directory (``docs/results`` in a
-   source checkout).
+   segments coloured by body) and ``README.md`` to the output directory (``docs/results/demo``
+   in a source checkout).
 
 Exits non-zero with a message when the node does not start or stops answering.
 """
 import argparse
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import itertools
 import math
-import os
 from pathlib import Path
-import random
-import shutil
-import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -45,42 +41,14 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-#: Node name of the demo (its outputs are ``/<NODE_NAME>/...``).
-NODE_NAME = 'mlofc'
-IMAGE_TOPIC = '/camera/image_raw'
-INFO_TOPIC = '/camera/camera_info'
+from mlofc_tools.bench import common
+from mlofc_tools.demo_node import (Collected, DemoConfig, DemoError, FrameOutput,  # noqa: F401
+                                   IMAGE_TOPIC, INFO_TOPIC, run_node)
+
 #: A detected segment matches a true edge when both its endpoints lie within this many pixels
 #: of the edge (point-to-segment distance).
 MATCH_TOLERANCE_PX = 3.0
 
-
-class DemoError(Exception):
-    """The demo cannot go on; the message says why (printed without a traceback)."""
-
-
-@dataclass
-class DemoConfig:
-    """What to render and how to run the node."""
-
-    frames: int = 60
-    boxes: int = 2
-    size: Tuple[int, int] = (640, 480)
-    fps: float = 30.0
-    noise: float = 2.0
-    seed: int = 0
-    method: Optional[str] = None
-    window: Optional[int] = None
-    frame_timeout: float = 30.0
-    startup_timeout: float = 60.0
-    domain_id: Optional[int] = None
-
-    @property
-    def num_bodies(self) -> int:
-        """Bodies the node is asked for: the boxes plus the static background."""
-        return self.boxes + 1
-
-
-# --- ground-truth scoring (numpy only) -------------------------------------------------------
 
 def point_segment_distance(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """Distances (K, L) in pixels from ``points`` (K, 2) ``(u, v)`` to ``segments`` (L, 4)."""
@@ -96,7 +64,8 @@ def point_segment_distance(points: np.ndarray, segments: np.ndarray) -> np.ndarr
 
 def match_segments(detected: np.ndarray, truth: np.ndarray,
                    tolerance: float = MATCH_TOLERANCE_PX) -> np.ndarray:
-    """Index (M,) of the true edge each detected segment lies on, ``-1`` when none does.
+    """
+    Index (M,) of the true edge each detected segment lies on, ``-1`` when none does.
 
     ``detected`` (M, 4) and ``truth`` (L, 4) are ``(u1, v1, u2, v2)`` pixels. A detection lies
     on an edge when both endpoints are within ``tolerance`` px of it (detections are often
@@ -115,7 +84,8 @@ def match_segments(detected: np.ndarray, truth: np.ndarray,
 
 
 def match_bodies(confusion: np.ndarray) -> Dict[int, int]:
-    """Map node labels (rows) to true bodies (columns) maximising the total overlap.
+    """
+    Map node labels (rows) to true bodies (columns) maximising the total overlap.
 
     ``confusion[i, g]`` counts segments with label ``i`` on body ``g``. Exhaustive over
     assignments (a handful of bodies); labels left without a body (or with no overlap) are
@@ -137,29 +107,6 @@ def match_bodies(confusion: np.ndarray) -> Dict[int, int]:
                 best = (score, perm)
         pairs = [(i, g) for g, i in enumerate(best[1])]
     return {int(i): int(g) for i, g in pairs if conf[i, g] > 0}
-
-
-@dataclass
-class FrameOutput:
-    """One ``~/segments`` message: (M, 4) px, track ids, labels (-1 unassigned), residuals."""
-
-    segments: np.ndarray
-    track_ids: np.ndarray
-    labels: np.ndarray
-    residuals: np.ndarray
-    latency: float = math.nan
-
-
-@dataclass
-class Collected:
-    """What the node published, by frame index; twists as ``twists[body][frame]``."""
-
-    frames: Dict[int, FrameOutput] = field(default_factory=dict)
-    twists: Dict[int, Dict[int, Tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
-    wall_time: float = 0.0
-    dropped: List[int] = field(default_factory=list)
-    node_command: List[str] = field(default_factory=list)
-    domain_id: int = 0
 
 
 @dataclass
@@ -189,7 +136,8 @@ class Evaluation:
 
 
 def evaluate(seq: Any, collected: Collected, warmup: int) -> Evaluation:
-    """Score ``collected`` against the rendered sequence ``seq`` (frames ``>= warmup`` only).
+    """
+    Score ``collected`` against the rendered sequence ``seq`` (frames ``>= warmup`` only).
 
     Label accuracy: among detections lying on a true edge and carrying a label, the share
     whose label maps (by :func:`match_bodies`) to the edge's body. ``assigned_fraction``: share
@@ -231,240 +179,6 @@ def evaluate(seq: Any, collected: Collected, warmup: int) -> Evaluation:
                       total, mapping, warmup)
 
 
-# --- the node process ------------------------------------------------------------------------
-
-def node_command() -> List[str]:
-    """Command that starts the installed ``mlofc_node`` (console script, colcon or PATH)."""
-    candidates = [Path(sys.executable).parent / 'mlofc_node',
-                  Path(sys.prefix) / 'lib' / 'mlofc_ros' / 'mlofc_node']
-    for cand in candidates:
-        if cand.is_file() and os.access(cand, os.X_OK):
-            return [str(cand)]
-    found = shutil.which('mlofc_node')
-    if found:
-        return [found]
-    # not installed as a script (e.g. running from a plain checkout): same code, same process
-    return [sys.executable, '-m', 'mlofc_ros.node']
-
-
-def fresh_domain_id() -> int:
-    """Pick a random ROS domain id in 1..100, different from the current one."""
-    current = os.environ.get('ROS_DOMAIN_ID')
-    rng = random.SystemRandom()
-    while True:
-        d = rng.randint(1, 100)
-        if str(d) != current:
-            return d
-
-
-class NodeProcess:
-    """``mlofc_node`` in its own process (context manager); stopped with SIGINT, then harder."""
-
-    def __init__(self, command: Sequence[str], env: Dict[str, str], log_path: Path) -> None:
-        self.command = list(command)
-        self.env = env
-        self.log_path = log_path
-        self.proc: Optional[subprocess.Popen] = None
-        self._log = None
-
-    def __enter__(self) -> 'NodeProcess':
-        self._log = open(self.log_path, 'wb')
-        try:
-            self.proc = subprocess.Popen(self.command, env=self.env, stdout=self._log,
-                                         stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
-        except OSError as exc:
-            self._log.close()
-            raise DemoError(f'cannot start the node ({" ".join(self.command)}): {exc}') from None
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.stop()
-
-    def alive(self) -> bool:
-        """Return True while the process runs."""
-        return self.proc is not None and self.proc.poll() is None
-
-    def stop(self) -> None:
-        """SIGINT (clean rclpy shutdown), then SIGTERM, then SIGKILL; closes the log."""
-        proc = self.proc
-        if proc is not None and proc.poll() is None:
-            for sig, wait in ((signal.SIGINT, 10.0), (signal.SIGTERM, 5.0),
-                              (signal.SIGKILL, 5.0)):
-                proc.send_signal(sig)
-                try:
-                    proc.wait(timeout=wait)
-                    break
-                except subprocess.TimeoutExpired:
-                    continue
-        if self._log is not None:
-            self._log.close()
-            self._log = None
-
-    def log_tail(self, lines: int = 15) -> str:
-        """Return the last lines of the node's output."""
-        try:
-            text = self.log_path.read_text(errors='replace').splitlines()
-        except OSError:
-            return ''
-        return '\n'.join(text[-lines:])
-
-
-def run_node(bag_path: Path, cfg: DemoConfig, workdir: Path,
-             log: Any = sys.stdout) -> Collected:
-    """Start the node, play ``bag_path`` into it in lock-step, collect its outputs."""
-    domain = cfg.domain_id if cfg.domain_id is not None else fresh_domain_id()
-    overrides = {'ROS_DOMAIN_ID': str(domain),
-                 'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get(
-                     'ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST'),
-                 'HOME': os.environ.get('HOME', tempfile.gettempdir())}
-    saved = {k: os.environ.get(k) for k in overrides}
-    os.environ.update(overrides)   # this process's rmw reads them too; restored on return
-    try:
-        return _run_node(bag_path, cfg, workdir, domain, log)
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
-def _run_node(bag_path: Path, cfg: DemoConfig, workdir: Path, domain: int,
-              log: Any) -> Collected:
-    env = dict(os.environ, PYTHONUNBUFFERED='1')
-
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from geometry_msgs.msg import TwistWithCovarianceStamped
-    from sensor_msgs.msg import PointCloud2
-
-    from mlofc_ros.bag.bagfile import BagReader, deserialize
-    from mlofc_ros.bag.player import Player
-    from mlofc_ros.ros_messages import parse_segments_msg, parse_twist_msg
-
-    with BagReader(bag_path) as bag:
-        stamps = [deserialize(m.rawdata, m.msgtype).header.stamp
-                  for m in bag.messages([IMAGE_TOPIC])]
-    frame_of = {(s.sec, s.nanosec): i for i, s in enumerate(stamps)}
-
-    params = {'num_bodies': cfg.num_bodies}
-    if cfg.method:
-        params['method'] = cfg.method
-    if cfg.window:
-        params['window'] = cfg.window
-    command = node_command() + ['--ros-args', '-r', f'__node:={NODE_NAME}',
-                                '-r', f'image:={IMAGE_TOPIC}', '-r', f'camera_info:={INFO_TOPIC}']
-    for k, v in params.items():
-        command += ['-p', f'{k}:={v}']
-    collected = Collected(node_command=command, domain_id=domain)
-    sent_at: Dict[int, float] = {}
-
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    node = rclpy.create_node('mlofc_demo', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    qos = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
-
-    def on_segments(msg: PointCloud2) -> None:
-        f = frame_of.get((msg.header.stamp.sec, msg.header.stamp.nanosec))
-        if f is None:
-            return
-        segs, ids, labels, res = parse_segments_msg(msg)
-        collected.frames[f] = FrameOutput(
-            np.asarray(segs, np.float64).reshape(-1, 4), np.asarray(ids),
-            np.asarray(labels, np.int64), np.asarray(res, np.float64),
-            time.monotonic() - sent_at.get(f, math.nan))
-
-    def on_twist(body: int, msg: TwistWithCovarianceStamped) -> None:
-        f = frame_of.get((msg.header.stamp.sec, msg.header.stamp.nanosec))
-        if f is not None:
-            collected.twists.setdefault(body, {})[f] = parse_twist_msg(msg)
-
-    seg_topic = f'/{NODE_NAME}/segments'
-    node.create_subscription(PointCloud2, seg_topic, on_segments, qos)
-    for i in range(cfg.num_bodies):
-        node.create_subscription(TwistWithCovarianceStamped, f'/{NODE_NAME}/body_{i}/twist',
-                                 lambda m, i=i: on_twist(i, m), qos)
-
-    def spin_for(seconds: float) -> None:
-        deadline = time.monotonic() + seconds
-        while (left := deadline - time.monotonic()) > 0:
-            executor.spin_once(timeout_sec=min(left, 0.05))
-
-    try:
-        with NodeProcess(command, env, workdir / 'node.log') as proc:
-            def fail(why: str) -> None:
-                tail = proc.log_tail()
-                raise DemoError(why + (f'\n--- node output ({proc.log_path}) ---\n{tail}'
-                                       if tail else ''))
-
-            log.write(f'starting the node: {" ".join(command)}  (ROS_DOMAIN_ID={domain})\n')
-            player = Player(node, str(bag_path), topics=[IMAGE_TOPIC, INFO_TOPIC])
-            t0 = time.monotonic()
-            while not (player.wait_for_subscribers(0.0)
-                       and node.count_publishers(seg_topic) > 0):
-                if not proc.alive():
-                    fail(f'the node exited with code {proc.proc.returncode} before it '
-                         'subscribed to the camera')
-                if time.monotonic() - t0 > cfg.startup_timeout:
-                    fail(f'the node did not come up on ROS_DOMAIN_ID={domain} within '
-                         f'{cfg.startup_timeout:g} s (no subscriber on {IMAGE_TOPIC})')
-                spin_for(0.1)
-            log.write(f'node up after {time.monotonic() - t0:.1f} s; playing '
-                      f'{len(stamps)} frames in lock-step\n')
-            # prime the node with the calibration so the first image already has it
-            with BagReader(bag_path) as bag:
-                first_info = next(bag.messages([INFO_TOPIC]), None)
-            if first_info is not None:
-                for _ in range(3):
-                    player.publishers[INFO_TOPIC].publish(first_info.rawdata)
-                    spin_for(0.05)
-
-            state = {'misses': 0}
-
-            def after_publish(msg: Any) -> None:
-                if msg.topic != IMAGE_TOPIC:
-                    return
-                f = len(sent_at)
-                sent_at[f] = time.monotonic()
-                deadline = time.monotonic() + cfg.frame_timeout
-                while f not in collected.frames:
-                    if not proc.alive():
-                        fail(f'the node exited with code {proc.proc.returncode} at frame {f}')
-                    if time.monotonic() > deadline:
-                        if not collected.frames:
-                            fail(f'the node did not answer the first frame within '
-                                 f'{cfg.frame_timeout:g} s (no {seg_topic})')
-                        state['misses'] += 1
-                        collected.dropped.append(f)
-                        if state['misses'] >= 3:
-                            fail(f'the node stopped answering (frames {collected.dropped} '
-                                 'got no segments)')
-                        return
-                    executor.spin_once(timeout_sec=0.05)
-                state['misses'] = 0
-                if f % 10 == 9 or f == len(stamps) - 1:
-                    log.write(f'  frame {f + 1}/{len(stamps)}: '
-                              f'{len(collected.frames[f].segments)} segments, '
-                              f'{collected.frames[f].latency * 1e3:.0f} ms\n')
-                    log.flush()
-
-            t_play = time.monotonic()
-            player.play(rate=0.0, after_publish=after_publish, sleep=spin_for)
-            collected.wall_time = time.monotonic() - t_play
-            spin_for(0.5)          # twists of the last frame follow its segments
-            player.destroy()
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
-    return collected
-
-
-# --- outputs ---------------------------------------------------------------------------------
-
 def strip_frames(n_frames: int, warmup: int, count: int = 4) -> List[int]:
     """Frame indices shown in the strip: ``count`` evenly spread after the warm-up."""
     first = min(warmup, n_frames - 1)
@@ -473,7 +187,8 @@ def strip_frames(n_frames: int, warmup: int, count: int = 4) -> List[int]:
 
 def render_strip(seq: Any, collected: Collected, frames: Sequence[int],
                  scale: Optional[float] = None) -> np.ndarray:
-    """BGR strip (uint8) of ``frames`` with the node's segments drawn by body (draw_debug).
+    """
+    BGR strip (uint8) of ``frames`` with the node's segments drawn by body (draw_debug).
 
     ``scale`` resizes each tile (default: half size for images 600 px wide or more).
     """
@@ -539,31 +254,29 @@ def summary_lines(seq: Any, ev: Evaluation, collected: Collected, cfg: DemoConfi
     return lines
 
 
-def write_report(path: Path, lines: Sequence[str], cfg: DemoConfig, collected: Collected,
-                 strip_name: str, argv: Sequence[str], total_time: float) -> None:
-    """Write the Markdown summary of a run."""
+def write_report(out: Optional[str], lines: Sequence[str], cfg: DemoConfig,
+                 collected: Collected, strip_name: str, argv: Sequence[str], total_time: float
+                 ) -> Path:
+    """Write the Markdown summary of a run to ``out`` (default ``docs/results/demo``)."""
     cmd = ' '.join(['python -m mlofc_tools.demo', *argv])
     node_cmd = ' '.join(Path(collected.node_command[0]).name if i == 0 else a
                         for i, a in enumerate(collected.node_command))
+    head = common.run_header('Demo: mlofc_node on a rendered bag', cmd, {
+        'Scene': f'{cfg.boxes} striped boxes rotating about the camera centre in front of a '
+                 f'static striped wall = {cfg.num_bodies} bodies; {cfg.size[0]}x{cfg.size[1]} '
+                 f'px, {cfg.frames} frames at {cfg.fps:g} Hz, noise sigma {cfg.noise:g} grey '
+                 f'levels, seed {cfg.seed}',
+        'Bag': f'rosbag2 mcap, `{IMAGE_TOPIC}` (mono8) + `{INFO_TOPIC}`, played by '
+               '`mlofc_ros.bag.player` in lock-step (each frame is sent when the node has '
+               'answered the previous one)',
+        'Node': f'separate process, `{node_cmd}`, fresh `ROS_DOMAIN_ID`',
+        'Scoring': f'a detection is on a true edge when both endpoints are within '
+                   f'{MATCH_TOLERANCE_PX:g} px of it; node body ids are matched to true bodies '
+                   'by label overlap; omega is the median over the scored frames of '
+                   '`~/body_<i>/twist` (converted to deg/s, camera optical frame)',
+        'Run time': f'{total_time:.0f} s'})
     text = [
-        '# Demo: mlofc_node on a rendered bag',
-        '',
-        f'Generated by `{cmd}`{" (`make demo`)" if not argv else ""} in {total_time:.0f} s '
-        'on this machine. Do not edit by hand.',
-        '',
-        f'- Scene: {cfg.boxes} striped boxes rotating about the camera centre in front of a '
-        f'static striped wall = {cfg.num_bodies} bodies; {cfg.size[0]}x{cfg.size[1]} px, '
-        f'{cfg.frames} frames at {cfg.fps:g} Hz, noise sigma {cfg.noise:g} grey levels, '
-        f'seed {cfg.seed}.',
-        f'- Bag: rosbag2 mcap, `{IMAGE_TOPIC}` (mono8) + `{INFO_TOPIC}`, played by '
-        '`mlofc_ros.bag.player` in lock-step (each frame is sent when the node has answered '
-        'the previous one).',
-        f'- Node: separate process, `{node_cmd}`, fresh `ROS_DOMAIN_ID`.',
-        f'- Scoring: a detection is on a true edge when both endpoints are within '
-        f'{MATCH_TOLERANCE_PX:g} px of it; node body ids are matched to true bodies by label '
-        'overlap; omega is the median over the scored frames of `~/body_<i>/twist` (converted '
-        'to deg/s, camera optical frame).',
-        '',
+        head,
         '```',
         *lines,
         '```',
@@ -571,13 +284,9 @@ def write_report(path: Path, lines: Sequence[str], cfg: DemoConfig, collected: C
         f'![segments coloured by body]({strip_name})',
         '',
     ]
+    path = common.results_dir('demo', out) / common.REPORT_NAME
     path.write_text('\n'.join(text))
-
-
-def default_out_dir() -> Path:
-    """``docs/results`` of the source checkout, else ``./mlofc_demo``."""
-    docs = Path(__file__).resolve().parents[1] / 'docs' / 'results'
-    return docs if docs.parent.is_dir() else Path.cwd() / 'mlofc_demo'
+    return path
 
 
 def _size(text: str) -> Tuple[int, int]:
@@ -596,8 +305,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--seed', type=int, default=0, help='scene and noise seed (default 0)')
     p.add_argument('--method', help='solver method (node parameter; default: its default)')
     p.add_argument('--window', type=int, help='window length (node parameter)')
-    p.add_argument('--out', type=Path, default=None,
-                   help='where demo.md and demo_strip.png go (default docs/results)')
+    p.add_argument('--out', default=None,
+                   help='where README.md and demo_strip.png go (default docs/results/demo)')
     p.add_argument('--keep-bag', action='store_true', help='keep the bag and node log in --out')
     p.add_argument('--frame-timeout', type=float, default=30.0,
                    help='seconds to wait for the node to answer a frame (default 30)')
@@ -617,14 +326,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     cfg = DemoConfig(frames=args.frames, boxes=args.boxes, size=args.size, seed=args.seed,
                      method=args.method, window=args.window, frame_timeout=args.frame_timeout,
                      startup_timeout=args.startup_timeout, domain_id=args.domain_id)
-    out_dir = args.out if args.out is not None else default_out_dir()
     t_start = time.monotonic()
     try:
         from mlofc_ros import params as mlofc_params
         from mlofc_ros.bag.bagfile import write_image_bag
         from mlofc_tools.render import render_sequence
 
-        out_dir.mkdir(parents=True, exist_ok=True)
+        out_dir = common.results_dir('demo', args.out)
         print(f'rendering {cfg.frames} frames ({cfg.size[0]}x{cfg.size[1]}, {cfg.boxes} boxes '
               '+ background) ...', flush=True)
         try:
@@ -653,8 +361,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if not cv2.imwrite(str(strip_path), strip, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
             raise DemoError(f'cannot write {strip_path}')
         total = time.monotonic() - t_start
-        write_report(out_dir / 'demo.md', lines, cfg, collected, strip_path.name, argv, total)
-        print(f'\nwrote {strip_path} and {out_dir / "demo.md"} ({total:.0f} s in all)')
+        path = write_report(args.out, lines, cfg, collected, strip_path.name, argv, total)
+        print(f'\nwrote {strip_path} and {path} ({total:.0f} s in all)')
     except DemoError as exc:
         print(f'demo: error: {exc}', file=sys.stderr)
         return 1

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Synthetic multi-body line scenes: the paper's section 4.1 protocol, generalised.
+"""
+Synthetic multi-body line scenes: the paper's section 4.1 protocol, generalised.
 
 Each of ``n`` rigid bodies carries random 3D line segments and moves relative to the camera by
 ``X' = R X + T`` between consecutive frames, with ``R = expm([w]x)`` a rotation about the CAMERA
@@ -40,11 +41,15 @@ SeedLike = Union[None, int, np.random.SeedSequence, np.random.Generator]
 
 #: How many rejection-sampling rounds :func:`make_scene` tries before giving up on a body.
 MAX_ROUNDS = 200
+#: Outlier kinds :func:`add_outliers` mixes, and the range of the jitter outliers (px).
+MIXES = ('mixed', 'jitter', 'stitched')
+JITTER_PX = (10.0, 30.0)
 
 
 @dataclass(frozen=True)
 class SyntheticScene:
-    """A synthetic multi-body line scene.
+    """
+    A synthetic multi-body line scene.
 
     Attributes
     ----------
@@ -102,7 +107,8 @@ class SyntheticScene:
 
 
 def rotation_matrices(rotvecs: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula ``expm([w]x)`` for a stack of rotation vectors.
+    """
+    Rodrigues' formula ``expm([w]x)`` for a stack of rotation vectors.
 
     Parameters
     ----------
@@ -143,7 +149,8 @@ def _unit_vectors(rng: np.random.Generator, n: int) -> np.ndarray:
 
 def _frame_poses(w: np.ndarray, t: np.ndarray, n_frames: int, ref: int
                  ) -> Tuple[np.ndarray, np.ndarray]:
-    """Pose of every frame relative to the reference frame, for every body.
+    """
+    Pose of every frame relative to the reference frame, for every body.
 
     With ``X_{k+1} = R X_k + T`` and ``X_ref`` given, ``X_k = R_k X_ref + t_k``.
 
@@ -179,7 +186,8 @@ def _sample_body_lines(rng: np.random.Generator, count: int, rots: np.ndarray,
                        trans: np.ndarray, kmat: np.ndarray, image_size: Tuple[int, int],
                        depth: Tuple[float, float], seg_length_px: Tuple[float, float],
                        slide: float) -> np.ndarray:
-    """Rejection-sample ``count`` 3D segments of one body visible in every frame.
+    """
+    Rejection-sample ``count`` 3D segments of one body visible in every frame.
 
     Parameters
     ----------
@@ -229,6 +237,42 @@ def _sample_body_lines(rng: np.random.Generator, count: int, rots: np.ndarray,
         f'translation_ratio or n_frames)')
 
 
+def _check_scene_args(n_bodies: int, counts: np.ndarray, lines_per_body: object,
+                      n_frames: int, noise_px: float, translation_ratio: float,
+                      depth: Tuple[float, float], rotation_deg: Tuple[float, float],
+                      slide: float) -> None:
+    """Raise ``ValueError`` on arguments of :func:`make_scene` that make no scene."""
+    if n_bodies < 1:
+        raise ValueError(f'n_bodies must be >= 1, got {n_bodies}')
+    if np.any(counts < 1):
+        raise ValueError(f'lines_per_body must be >= 1, got {lines_per_body}')
+    if n_frames < 2:
+        raise ValueError(f'n_frames must be >= 2, got {n_frames}')
+    if noise_px < 0 or translation_ratio < 0:
+        raise ValueError(f'noise_px and translation_ratio must be >= 0, got {noise_px}, '
+                         f'{translation_ratio}')
+    if not 0 < depth[0] <= depth[1]:
+        raise ValueError(f'depth must be 0 < near <= far, got {depth}')
+    if not 0 <= rotation_deg[0] <= rotation_deg[1]:
+        raise ValueError(f'rotation_deg must be 0 <= low <= high, got {rotation_deg}')
+    if not 0 <= slide < 0.5:
+        raise ValueError(f'slide must be in [0, 0.5), got {slide}')
+
+
+def _sample_motions(rng: np.random.Generator, n_bodies: int, rotation_deg: Tuple[float, float],
+                    translation_ratio: float, pure_translation_body: bool
+                    ) -> Tuple[np.ndarray, np.ndarray]:
+    """Draw the bodies' rotation vectors ``w`` (n, 3) and translations ``t`` (n, 3) per frame."""
+    angles = np.deg2rad(rng.uniform(rotation_deg[0], rotation_deg[1], size=n_bodies))
+    w = _unit_vectors(rng, n_bodies) * angles[:, None]
+    t_norm = translation_ratio * angles
+    if pure_translation_body:
+        w[-1] = 0.0
+        t_norm[-1] = translation_ratio * angles[0]
+    t = _unit_vectors(rng, n_bodies) * t_norm[:, None]
+    return w, t
+
+
 def make_scene(n_bodies: int, lines_per_body: Union[int, Sequence[int]], n_frames: int = 2,
                noise_px: float = 1.0, image_size: Tuple[int, int] = (1000, 1000),
                focal_length: float = 1000.0, rotation_deg: Tuple[float, float] = (2.0, 6.0),
@@ -236,7 +280,8 @@ def make_scene(n_bodies: int, lines_per_body: Union[int, Sequence[int]], n_frame
                pure_translation_body: bool = False, seed: SeedLike = None,
                seg_length_px: Tuple[float, float] = (50.0, 400.0), slide: float = 0.1,
                reference_frame: Optional[int] = None) -> SyntheticScene:
-    """Generate a random multi-body line scene (the paper's section 4.1 protocol).
+    """
+    Generate a random multi-body line scene (the paper's section 4.1 protocol).
 
     Every body gets a rotation axis uniform on the sphere and an angle uniform in
     ``rotation_deg`` (degrees per frame), constant over the ``n_frames`` frames, about the camera
@@ -298,21 +343,8 @@ def make_scene(n_bodies: int, lines_per_body: Union[int, Sequence[int]], n_frame
         On invalid arguments, or when no segment stays visible under the requested motion.
     """
     counts = np.broadcast_to(np.asarray(lines_per_body, dtype=np.int64), (n_bodies,))
-    if n_bodies < 1:
-        raise ValueError(f'n_bodies must be >= 1, got {n_bodies}')
-    if np.any(counts < 1):
-        raise ValueError(f'lines_per_body must be >= 1, got {lines_per_body}')
-    if n_frames < 2:
-        raise ValueError(f'n_frames must be >= 2, got {n_frames}')
-    if noise_px < 0 or translation_ratio < 0:
-        raise ValueError(f'noise_px and translation_ratio must be >= 0, got {noise_px}, '
-                         f'{translation_ratio}')
-    if not 0 < depth[0] <= depth[1]:
-        raise ValueError(f'depth must be 0 < near <= far, got {depth}')
-    if not 0 <= rotation_deg[0] <= rotation_deg[1]:
-        raise ValueError(f'rotation_deg must be 0 <= low <= high, got {rotation_deg}')
-    if not 0 <= slide < 0.5:
-        raise ValueError(f'slide must be in [0, 0.5), got {slide}')
+    _check_scene_args(n_bodies, counts, lines_per_body, n_frames, noise_px, translation_ratio,
+                      depth, rotation_deg, slide)
     ref = (n_frames - 1) // 2 if reference_frame is None else int(reference_frame)
     if not 0 <= ref < n_frames:
         raise ValueError(f'reference_frame must be in [0, {n_frames}), got {ref}')
@@ -322,13 +354,8 @@ def make_scene(n_bodies: int, lines_per_body: Union[int, Sequence[int]], n_frame
     intrinsics = (f, f, w_img / 2.0, h_img / 2.0)
     kmat = np.array([[f, 0.0, intrinsics[2]], [0.0, f, intrinsics[3]], [0.0, 0.0, 1.0]])
 
-    angles = np.deg2rad(rng.uniform(rotation_deg[0], rotation_deg[1], size=n_bodies))
-    w = _unit_vectors(rng, n_bodies) * angles[:, None]
-    t_norm = translation_ratio * angles
-    if pure_translation_body:
-        w[-1] = 0.0
-        t_norm[-1] = translation_ratio * angles[0]
-    t = _unit_vectors(rng, n_bodies) * t_norm[:, None]
+    w, t = _sample_motions(rng, n_bodies, rotation_deg, translation_ratio,
+                           pure_translation_body)
     rots, trans = _frame_poses(w, t, n_frames, ref)
 
     pts = np.concatenate([
@@ -345,3 +372,53 @@ def make_scene(n_bodies: int, lines_per_body: Union[int, Sequence[int]], n_frame
                           angular_velocities=w, translations=t, intrinsics=intrinsics,
                           image_size=(w_img, h_img), points=pts, noise_px=float(noise_px),
                           reference_frame=ref)
+
+
+def add_outliers(tracks: np.ndarray, fraction: float, rng: np.random.Generator,
+                 mix: str = 'mixed') -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Replace a fraction of the tracks by tracks that follow no rigid motion.
+
+    *Jitter* outliers: every endpoint of every frame of the track moved by a distance uniform
+    in :data:`JITTER_PX` in a uniform direction, independently. *Stitched* outliers: frame ``k``
+    of the track is frame ``k`` of another line of the scene, a different line for every frame
+    (a tracker's association error). ``mix='mixed'`` makes half of the outliers (rounded up)
+    jitter and the others stitched; ``'jitter'`` or ``'stitched'`` only one kind.
+
+    Parameters
+    ----------
+    tracks : (N, K, 4) float
+        Line tracks (pixels).
+    fraction : float
+        Fraction of the tracks to replace (rounded to a whole number of tracks).
+    rng : numpy Generator
+    mix : {'mixed', 'jitter', 'stitched'}
+
+    Returns
+    -------
+    tracks : (N, K, 4) float64
+        A copy with the outliers in place.
+    kind : (N,) int64
+        0 = inlier (unchanged), 1 = jitter outlier, 2 = stitched outlier.
+    """
+    src = np.asarray(tracks, dtype=np.float64)
+    n_tracks, n_frames = src.shape[:2]
+    out = src.copy()
+    kind = np.zeros(n_tracks, dtype=np.int64)
+    m = int(round(fraction * n_tracks))
+    idx = rng.choice(n_tracks, size=m, replace=False)
+    if mix not in MIXES:
+        raise ValueError(f'mix must be one of {MIXES}, got {mix!r}')
+    n_jit = {'mixed': (m + 1) // 2, 'jitter': m, 'stitched': 0}[mix]
+    jit, sti = idx[:n_jit], idx[n_jit:]
+    mag = rng.uniform(JITTER_PX[0], JITTER_PX[1], size=(jit.size, n_frames, 2))
+    ang = rng.uniform(0.0, 2.0 * math.pi, size=mag.shape)
+    disp = np.stack([mag * np.cos(ang), mag * np.sin(ang)], axis=-1)  # (J, K, 2 ends, uv)
+    out[jit] += disp.reshape(jit.size, n_frames, 4)
+    kind[jit] = 1
+    for i in sti:  # a few tracks per scene: a loop costs nothing
+        others = rng.choice(n_tracks - 1, size=n_frames, replace=n_frames > n_tracks - 1)
+        others[others >= i] += 1
+        out[i] = src[others, np.arange(n_frames)]
+    kind[sti] = 2
+    return out, kind

@@ -24,7 +24,7 @@ from mlofc_tools.bench import pipeline, soak
 
 def test_pipeline_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert pipeline.main(['--quick', '--out', str(tmp_path)]) == 0
-    text = (tmp_path / 'pipeline.md').read_text()
+    text = (tmp_path / 'README.md').read_text()
     assert 'python -m mlofc_tools.bench pipeline --quick' in text
     assert '## Stages (median / p95 ms per frame)' in text
     assert '## Where the mean goes: frames with and without detection' in text
@@ -58,7 +58,7 @@ def test_pipeline_takes_node_parameters(tmp_path: pathlib.Path) -> None:
     argv = ['--quick', '-p', 'detect_every:=4', '-p', 'detector_scale:=0.5', '--out',
             str(tmp_path)]
     assert pipeline.main(argv) == 0
-    assert '`detect_every:=4`, `detector_scale:=0.5`' in (tmp_path / 'pipeline.md').read_text()
+    assert '`detect_every:=4`, `detector_scale:=0.5`' in (tmp_path / 'README.md').read_text()
     with pytest.raises(SystemExit):
         pipeline.main(['--quick', '-p', 'detector_scale:=2.0', '--out', str(tmp_path)])
 
@@ -75,7 +75,7 @@ def test_read_visp_camera(tmp_path: pathlib.Path) -> None:
 
 def test_soak_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert soak.main(['--quick', '--out', str(tmp_path)]) == 0
-    text = (tmp_path / 'soak.md').read_text()
+    text = (tmp_path / 'README.md').read_text()
     assert 'Status: complete. 20 frames' in text
     assert 'Growth end - start' in text
     assert soak.rss_mb() > 1.0
@@ -86,7 +86,7 @@ def test_ros_quick_writes_report(tmp_path: pathlib.Path) -> None:
     from mlofc_tools.bench import ros
     os.environ.setdefault('HOME', tempfile.gettempdir())
     assert ros.main(['--quick', '--out', str(tmp_path)]) == 0
-    text = (tmp_path / 'ros.md').read_text()
+    text = (tmp_path / 'README.md').read_text()
     assert '## Per rate' in text and 'kept up' in text
     # both rates ran, and at 5 Hz the node answered at least one 320x240 frame
     rows = [ln for ln in text.splitlines() if ln.startswith('| 5 |') or ln.startswith('| 10 |')]
@@ -111,7 +111,7 @@ def test_live_quick_writes_report(tmp_path: pathlib.Path) -> None:
     from mlofc_tools.bench import live
     os.environ.setdefault('HOME', tempfile.gettempdir())
     assert live.main(['--quick', '--out', str(tmp_path)]) == 0
-    text = (tmp_path / 'live.md').read_text()
+    text = (tmp_path / 'README.md').read_text()
     assert '## Over the seeds' in text and '## Every run' in text
     row = [ln for ln in text.splitlines() if ln.startswith('| own2 | 0 | 10 |')]
     assert len(row) == 1
@@ -138,7 +138,7 @@ def test_ros_headline_names_the_limit_or_says_it_is_above() -> None:
 def test_covariance_quick_writes_report(tmp_path: pathlib.Path) -> None:
     from mlofc_tools.bench import covariance
     assert covariance.main(['--quick', '--out', str(tmp_path)]) == 0
-    text = (tmp_path / 'covariance.md').read_text()
+    text = (tmp_path / 'README.md').read_text()
     rows = {ln.split('|')[1].strip(): ln.split('|') for ln in text.splitlines()
             if ln.startswith('| own2 general') or ln.startswith('| cam2+bg robust')}
     assert set(rows) == {'own2 general', 'cam2+bg robust'}

@@ -58,7 +58,7 @@ def test_small_run_writes_report(tmp_path: pathlib.Path) -> None:
             '--frames', '6',
             '--seeds', '0', '--timing-frames', '8', '--out', str(tmp_path)]
     assert tradeoff.main(argv) == 0
-    text = (tmp_path / 'tradeoff.md').read_text()
+    text = (tmp_path / 'README.md').read_text()
     assert 'python -m mlofc_tools.bench tradeoff --scales 0.5' in text
     rows = [line for line in text.splitlines() if line.startswith('| 0.5 |')]
     assert len(rows) == 2 and {row.split('|')[2].strip() for row in rows} == {'3', '6'}

@@ -20,7 +20,7 @@ import sys
 import numpy as np
 import pytest
 
-from mlofc_tools import demo
+from mlofc_tools import demo, demo_node
 
 
 def test_match_segments_accepts_parts_of_edges():
@@ -56,21 +56,21 @@ def test_demo_runs_the_node_as_a_subprocess(tmp_path):
     accuracy = float(re.search(r'label accuracy ([\d.]+) %', out).group(1))
     assert accuracy > 80.0, out
     assert (tmp_path / 'demo_strip.png').stat().st_size > 10_000
-    report = (tmp_path / 'demo.md').read_text()
+    report = (tmp_path / 'README.md').read_text()
     assert 'label accuracy' in report and '![segments coloured by body](demo_strip.png)' in report
 
 
 @pytest.mark.ros
 def test_demo_fails_cleanly_when_the_node_does_not_answer(tmp_path, monkeypatch, capsys):
     # a "node" that never subscribes to anything
-    monkeypatch.setattr(demo, 'node_command',
+    monkeypatch.setattr(demo_node, 'node_command',
                         lambda: [sys.executable, '-c', 'import time; time.sleep(30)'])
     rc = demo.main(['--frames', '3', '--size', '64x48', '--out', str(tmp_path),
                     '--startup-timeout', '2'])
     err = capsys.readouterr().err
     assert rc == 1
     assert 'did not come up' in err and 'Traceback' not in err
-    assert not (tmp_path / 'demo.md').exists()
+    assert not (tmp_path / 'README.md').exists()
 
 
 def test_summary_survives_a_node_that_found_nothing():

@@ -195,11 +195,10 @@ def _ksubspaces_naive(stats, n, labels, dof, max_iter=100):
 def test_ksubspaces_cycle_jump_gives_the_plain_loop_result(seed):
     # trimming makes these labellings cycle: the plain loop runs all 100 iterations, and the
     # cycle jump must end on exactly the same labels, c and costs
-    from mlofc_tools.bench.accuracy import add_outliers
     from mlofc_ros.solver.core import _check_tracks
     from mlofc_ros.solver.ksubspaces import ksubspaces
     from mlofc_ros.solver.models import track_stats
-    from mlofc_tools.synthetic import make_scene
+    from mlofc_tools.synthetic import add_outliers, make_scene
     sc = make_scene(2, 15, n_frames=5, noise_px=2.0, seed=seed)
     tracks, _ = add_outliers(sc.tracks, 0.3, np.random.default_rng(seed))
     flows = line_flows(_check_tracks(tracks), sc.intrinsics)

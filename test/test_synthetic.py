@@ -11,16 +11,16 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The synthetic scene generator (paper section 4.1) and the paper benchmark's smoke run."""
+"""The synthetic scene generator (paper section 4.1), its outliers and the scoring helpers."""
 import numpy as np
 import pytest
 
-from mlofc_tools.bench import common
-from mlofc_tools.synthetic import make_scene, rotation_matrices
+from mlofc_tools.scoring import best_permutation, misclassification, motion_errors
+from mlofc_tools.synthetic import add_outliers, make_scene, MIXES, rotation_matrices
 
 
 def _normals(tracks: np.ndarray, intrinsics) -> np.ndarray:
-    """Unit interpretation-plane normals (N, K, 3) of pixel segments (N, K, 4)."""
+    """Return the unit interpretation-plane normals (N, K, 3) of pixel segments (N, K, 4)."""
     fx, fy, cx, cy = intrinsics
     p = tracks.reshape(tracks.shape[0], tracks.shape[1], 2, 2)
     x = np.stack([(p[..., 0] - cx) / fx, (p[..., 1] - cy) / fy, np.ones(p.shape[:-1])], axis=-1)
@@ -123,25 +123,31 @@ def test_invalid_arguments():
 def test_scoring_helpers():
     truth = np.array([0, 0, 0, 1, 1, 2, 2])
     pred = np.array([2, 2, 1, 0, 0, 1, -1])
-    perm, errors = common.best_permutation(pred, truth, 3)
+    perm, errors = best_permutation(pred, truth, 3)
     assert perm == (1, 2, 0) and errors == 2
-    assert common.misclassification(pred, truth, 3) == pytest.approx(2 / 7)
+    assert misclassification(pred, truth, 3) == pytest.approx(2 / 7)
     w = np.array([[0.1, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.0]])
-    rel, abs_deg = common.motion_errors(w[[1, 2, 0]], w, perm)
+    rel, abs_deg = motion_errors(w[[1, 2, 0]], w, perm)
     assert rel == 0.0 and abs_deg == 0.0
-    table = common.markdown_table(['a', 'b'], [['x', 1.23456], ['y', float('nan')]])
-    assert '| x | 1.23 |' in table and '| y | — |' in table
 
 
-def test_paper_bench_quick(tmp_path):
-    try:
-        from mlofc_ros.solver import METHODS, segment_lines  # noqa: F401
-    except ImportError as exc:
-        pytest.skip(f'solver not importable yet: {exc}')
-    from mlofc_tools.bench import paper
-    rc = paper.main(['--quick', '--trials', '1', '--jobs', '1', '--out', str(tmp_path)])
-    assert rc == 0
-    text = (tmp_path / 'paper.md').read_text()
-    assert 'floor (unweighted)' in text and 'Fig. 5' in text
-    for fig in ('fig2', 'fig3', 'fig4', 'fig5'):
-        assert (tmp_path / f'paper_{fig}.png').stat().st_size > 1000
+@pytest.mark.parametrize('mix', MIXES)
+def test_add_outliers(mix: str) -> None:
+    scene = make_scene(2, 20, n_frames=3, noise_px=1.0, seed=3)
+    rng = np.random.default_rng(0)
+    tracks, kind = add_outliers(scene.tracks, 0.15, rng, mix)
+    assert tracks.shape == scene.tracks.shape
+    assert np.sum(kind > 0) == 6
+    np.testing.assert_array_equal(tracks[kind == 0], scene.tracks[kind == 0])
+    if mix != 'stitched':
+        jit = kind == 1
+        moved = np.hypot(*(tracks[jit] - scene.tracks[jit]).reshape(-1, 2).T)
+        assert np.all((moved >= 10.0 - 1e-9) & (moved <= 30.0 + 1e-9))
+    if mix != 'jitter':
+        # every frame of a stitched track is that frame of some OTHER line of the scene
+        for i in np.flatnonzero(kind == 2):
+            for k in range(scene.n_frames):
+                same = np.all(scene.tracks[:, k] == tracks[i, k], axis=1)
+                assert same.any() and not same[i]
+    with pytest.raises(ValueError):
+        add_outliers(scene.tracks, 0.15, rng, 'bogus')

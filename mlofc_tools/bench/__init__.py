@@ -11,7 +11,9 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Benchmarks: each writes Markdown tables and PNG plots to ``docs/results/``.
+"""
+Benchmarks: each writes its report and plots to ``docs/results/NAME/`` (or ``--out DIR``).
 
-Run ``python -m mlofc_tools.bench NAME [options]``; ``python -m mlofc_tools.bench --help`` lists them.
+Run ``python -m mlofc_tools.bench NAME [options]``; ``python -m mlofc_tools.bench --help``
+lists them. The report is ``README.md``, its plots are PNGs beside it; a rerun replaces them.
 """

@@ -33,7 +33,8 @@ BENCHMARKS = {
 
 
 def run_all() -> int:
-    """Run every benchmark with its defaults, in turn; returns the worst exit code.
+    """
+    Run every benchmark with its defaults, in turn; returns the worst exit code.
 
     One failing benchmark does not stop the others (each writes its own report).
     """

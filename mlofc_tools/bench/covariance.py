@@ -13,7 +13,7 @@
 # limitations under the License.
 """Is the published angular-velocity covariance honest? NEES on rendered scenes.
 
-Run ``python -m mlofc_tools.bench covariance``; writes ``docs/results/covariance.md``. The scenes
+Run ``python -m mlofc_tools.bench covariance``; writes ``docs/results/covariance/``. The scenes
 of ``bench spinning`` go through :class:`~mlofc_ros.pipeline.Pipeline` (30 frames, every frame
 solved); for every moving box and scored frame the normalised estimation error squared
 
@@ -56,7 +56,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--seeds', default='0,1,2,3,4,5', help='render seeds')
     ap.add_argument('--frames', type=int, default=30)
     ap.add_argument('--jobs', type=int, default=2, help='runs in this many processes')
-    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results/covariance)')
     ap.add_argument('--quick', action='store_true',
                     help='smoke run: seed 0, 8 frames, own2 general (scaled) and cam2+bg robust')
     args = ap.parse_args(list(argv))
@@ -141,13 +141,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
     t0 = time.monotonic()
-    rev = common.git_revision('mlofc_ros')      # the whole package, before the runs import it
     items = [(c, seed, args.frames) for c in args.configs for seed in args.seed_list]
     records = common.run_parallel(run_one, items, args.jobs, what='runs')
     text = '\n'.join([
         common.run_header('Angular-velocity covariance: NEES on rendered scenes',
                           common.command_line('covariance', argv), {
-                              'Code revision (mlofc_ros, at the start)': rev,
                               'Sequences': f'{args.frames} frames 640x480 at 30 Hz, render '
                                            f'seeds {args.seeds}, every frame solved',
                               'Run time': f'{time.monotonic() - t0:.0f} s'}),
@@ -159,7 +157,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         '',
         __doc__.split('\n\n', 1)[1].strip(),
         ''])
-    common.write_report(args.out, 'covariance.md', text)
+    common.write_report('covariance', args.out, text)
     return 0
 
 

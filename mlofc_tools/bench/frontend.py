@@ -11,10 +11,11 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Front-end benchmark: line detection and tracking on rendered and real sequences.
+"""
+Front-end benchmark: line detection and tracking on rendered and real sequences.
 
 Run ``python -m mlofc_tools.bench frontend`` (or ``python -m mlofc_tools.bench.frontend``); writes
-``docs/results/frontend.md`` and ``docs/results/frontend.png``.
+``README.md`` and ``frontend.png`` to ``docs/results/frontend/`` (or ``--out``).
 """
 import argparse
 from collections import defaultdict
@@ -29,235 +30,16 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from mlofc_tools.bench import common
-from mlofc_tools.datasets.shared import shared_data_dir
 from mlofc_ros.segments.detect import has_ximgproc, LineDetector
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
+from mlofc_tools.bench import common
+from mlofc_tools.datasets.shared import shared_data_dir
+from mlofc_tools.scoring import match_to_truth, score_tracks
 
 #: Real sequences (no ground truth), see ``/work/shared/data/real/README.md``.
 REAL_DIR = os.environ.get('MLOFC_REAL_DIR', str(shared_data_dir() / 'real'))
 REAL_SEQUENCES = ('visp_cube', 'rubik_cube', 'hamburg_taxi')
-
-
-def match_to_truth(seg: np.ndarray, gt: np.ndarray, angle_deg: float = 3.0,
-                   dist_px: float = 2.0, min_overlap: float = 0.5,
-                   visible_fraction: Optional[np.ndarray] = None
-                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Assign every segment (M, 4) px to the ground-truth segment (L, 4) px it lies on.
-
-    A segment lies on a GT segment when their (unoriented) directions differ by less than
-    ``angle_deg``, at least ``min_overlap`` of the segment's length projects inside the GT
-    segment, and both endpoints of the overlapping part are within ``dist_px`` of the GT line.
-    With ``visible_fraction`` (L,), GT segments of partly hidden edges (fraction < 0.95; the
-    GT segment is only the longest visible part) are extended along their line by 4 lengths
-    each way, so that a segment on another visible part of the same 3D edge still counts.
-    Returns ``(gt_index (M,) intp, -1 when none; line_error (M,) px, the mean distance of the
-    overlapping part's endpoints to the GT line; endpoint_error (M,) px, the mean distance of
-    each segment endpoint to the nearer GT endpoint)``; errors are NaN for unmatched segments.
-    """
-    m, n = seg.shape[0], gt.shape[0]
-    idx = np.full(m, -1, np.intp)
-    line_err = np.full(m, np.nan)
-    end_err = np.full(m, np.nan)
-    if m == 0 or n == 0:
-        return idx, line_err, end_err
-    s = seg.astype(np.float64)
-    g = gt.astype(np.float64).copy()
-    if visible_fraction is not None:
-        # partly hidden edges: any visible part of the 3D edge counts, i.e. its whole line
-        # within the image (the GT segment is only the longest visible part)
-        vf = np.asarray(visible_fraction, dtype=np.float64)
-        ext = np.where(vf < 0.95, 4.0, 0.0)[:, None] * (g[:, 2:] - g[:, :2])
-        g = np.concatenate([g[:, :2] - ext, g[:, 2:] + ext], axis=1)
-    gd = g[:, 2:] - g[:, :2]
-    gl = np.maximum(np.hypot(gd[:, 0], gd[:, 1]), 1e-9)
-    gu = gd / gl[:, None]
-    gn = np.stack([-gu[:, 1], gu[:, 0]], 1)
-    sd = s[:, 2:] - s[:, :2]
-    sl = np.maximum(np.hypot(sd[:, 0], sd[:, 1]), 1e-9)
-    su = sd / sl[:, None]
-    cos = np.abs(su @ gu.T)                                            # (M, L)
-    r1 = s[:, None, :2] - g[None, :, :2]
-    r2 = s[:, None, 2:] - g[None, :, :2]
-    t1 = np.einsum('mlk,lk->ml', r1, gu)
-    t2 = np.einsum('mlk,lk->ml', r2, gu)
-    d1 = np.einsum('mlk,lk->ml', r1, gn)
-    d2 = np.einsum('mlk,lk->ml', r2, gn)
-    lo = np.clip(np.minimum(t1, t2), 0, gl[None, :])
-    hi = np.clip(np.maximum(t1, t2), 0, gl[None, :])
-    span = np.maximum(np.abs(t2 - t1), 1e-9)
-    overlap = (hi - lo) / span
-    # distances at the overlap ends, by linear interpolation of the signed distance
-    da = d1 + (d2 - d1) * (lo - t1) / np.where(t2 != t1, t2 - t1, 1.0)
-    db = d1 + (d2 - d1) * (hi - t1) / np.where(t2 != t1, t2 - t1, 1.0)
-    dist = 0.5 * (np.abs(da) + np.abs(db))
-    ok = (cos >= np.cos(np.deg2rad(angle_deg))) & (overlap >= min_overlap) \
-        & (np.maximum(np.abs(da), np.abs(db)) <= dist_px)
-    cost = np.where(ok, dist, np.inf)
-    best = np.argmin(cost, axis=1)
-    hit = np.isfinite(cost[np.arange(m), best])
-    idx[hit] = best[hit]
-    line_err[hit] = dist[np.arange(m), best][hit]
-    gb = gt[best].astype(np.float64)
-    e = np.minimum(np.hypot(*(s[:, :2] - gb[:, :2]).T), np.hypot(*(s[:, :2] - gb[:, 2:]).T)) \
-        + np.minimum(np.hypot(*(s[:, 2:] - gb[:, :2]).T), np.hypot(*(s[:, 2:] - gb[:, 2:]).T))
-    end_err[hit] = 0.5 * e[hit]
-    return idx, line_err, end_err
-
-
-def unresolvable_edges(gt: np.ndarray, angle_deg: float = 3.0, dist_px: float = 2.0,
-                       min_overlap: float = 0.5) -> np.ndarray:
-    """Mask (L,) of GT segments (L, 4) px that the image cannot separate from another one.
-
-    Edge ``i`` is unresolvable when some other GT segment ``j`` is within ``angle_deg`` of it,
-    overlaps at least ``min_overlap`` of ``i``'s length along ``i``'s line, and lies within
-    ``dist_px`` of that line at both ends of the common part: the same tolerances by which
-    :func:`match_to_truth` puts a segment on an edge, so a track on either could be matched to
-    both (in the rendered sequences: stripes and box edges converging as a face turns
-    edge-on).
-    """
-    n = gt.shape[0]
-    if n < 2:
-        return np.zeros(n, bool)
-    g = gt.astype(np.float64)
-    d = g[:, 2:] - g[:, :2]
-    gl = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
-    u = d / gl[:, None]
-    nrm = np.stack([-u[:, 1], u[:, 0]], 1)
-    cos = np.abs(u @ u.T)                                              # (i, j)
-    r1 = g[None, :, :2] - g[:, None, :2]                               # j's ends rel. to i
-    r2 = g[None, :, 2:] - g[:, None, :2]
-    t1 = np.einsum('ijk,ik->ij', r1, u)
-    t2 = np.einsum('ijk,ik->ij', r2, u)
-    d1 = np.einsum('ijk,ik->ij', r1, nrm)
-    d2 = np.einsum('ijk,ik->ij', r2, nrm)
-    lo = np.clip(np.minimum(t1, t2), 0, gl[:, None])
-    hi = np.clip(np.maximum(t1, t2), 0, gl[:, None])
-    den = np.where(t2 != t1, t2 - t1, 1.0)
-    da = d1 + (d2 - d1) * (lo - t1) / den
-    db = d1 + (d2 - d1) * (hi - t1) / den
-    close = (cos >= np.cos(np.deg2rad(angle_deg))) & (hi - lo >= min_overlap * gl[:, None]) \
-        & (np.maximum(np.abs(da), np.abs(db)) <= dist_px)
-    np.fill_diagonal(close, False)
-    return close.any(axis=1)
-
-
-def score_tracks(frames_ids: Sequence[np.ndarray], frames_seg: Sequence[np.ndarray],
-                 truth: Sequence[object], min_gt_length: float = 30.0, window: int = 5,
-                 use_distorted: bool = False) -> Dict[str, float]:
-    """Score track output against rendered ground truth.
-
-    ``frames_ids[f]`` (M_f,) and ``frames_seg[f]`` (M_f, 4) px are the tracker output of frame
-    ``f``; ``truth[f]`` a ``FrameTruth``. GT edges count when at least ``min_gt_length`` px
-    long. Returns a dict:
-
-    * ``tracked_5``: share of (GT edge, ``window`` consecutive frames with the edge present)
-      pairs in which one track id lies on the edge in all ``window`` frames;
-    * ``recall``: share of (GT edge, frame) pairs with some track on the edge;
-    * ``id_switch_pct``: GT side, % of frames (with the edge matched before and now) where
-      none of the edge's current tracks carries its previous id (MOT-style switches);
-    * ``id_jump_pct``: track side, % of a track's consecutive matched frames where it moved
-      to a different GT edge (a track mixing two 3D lines); ``cross_body_jump_pct``: the
-      same for moves to an edge of another body (the harmful kind for motion segmentation);
-    * ``line_err_px`` / ``endpoint_err_px``: median errors of the matched track segments;
-    * ``precision``: share of reported segments lying on some GT edge (any length);
-    * ``tracked_5_resolvable`` / ``id_switch_pct_resolvable``: the same as ``tracked_5`` /
-      ``id_switch_pct`` counting only windows / transitions in which the edge is resolvable in
-      every frame (see :func:`unresolvable_edges`); ``unresolvable_window_pct``: % of the
-      ``tracked_5`` windows so left out;
-    * ``id_switch_pct_in_view``: ``id_switch_pct`` over the transitions (``transitions_in_view``)
-      where the edge stayed in view in between (long enough in every frame since it was last
-      matched): the switches left when re-acquisitions of an edge that went out of view (a
-      face turning away and back) are not counted; no tracker re-identifies those.
-    """
-    present: Dict[int, List[int]] = defaultdict(list)       # edge -> frames present (long)
-    unres: List[set] = []                                    # frame -> unresolvable edges
-    on_edge: List[Dict[int, set]] = []                       # frame -> edge -> track ids
-    track_edges: Dict[int, List[int]] = defaultdict(list)
-    edge_body: Dict[int, int] = {}
-    line_errs, end_errs = [], []
-    n_rep = n_hit = 0
-    for f, (ids, seg, tr) in enumerate(zip(frames_ids, frames_seg, truth)):
-        gt = tr.segments_distorted if use_distorted else tr.segments
-        glen = np.hypot(gt[:, 2] - gt[:, 0], gt[:, 3] - gt[:, 1])
-        gi, le, ee = match_to_truth(seg, gt, visible_fraction=tr.visible_fraction)
-        n_rep += len(ids)
-        n_hit += int((gi >= 0).sum())
-        long_ = glen >= min_gt_length
-        unres.append(set(tr.edge_ids[unresolvable_edges(gt)].tolist()))
-        for e in tr.edge_ids[long_]:
-            present[int(e)].append(f)
-        edge_body.update(zip(tr.edge_ids.tolist(), tr.body_ids.tolist()))
-        d: Dict[int, set] = defaultdict(set)
-        for tid, j in zip(ids[gi >= 0], gi[gi >= 0]):
-            eid = int(tr.edge_ids[j])
-            d[eid].add(int(tid))
-            track_edges[int(tid)].append(eid)
-        on_edge.append(d)
-        sel = (gi >= 0)
-        sel[sel] = long_[gi[sel]]
-        line_errs.extend(le[sel].tolist())
-        end_errs.extend(ee[sel].tolist())
-    ok5 = tot5 = rec = rec_tot = 0
-    sw = sw_tot = 0
-    ok5r = tot5r = swr = sw_totr = 0
-    swv = sw_totv = 0
-    for e, fr in present.items():
-        fr_set = set(fr)
-        for f in fr:
-            rec_tot += 1
-            rec += bool(on_edge[f].get(e))
-            if all((f + k) in fr_set for k in range(window)):
-                tot5 += 1
-                common = set(on_edge[f].get(e, set()))
-                for k in range(1, window):
-                    common &= on_edge[f + k].get(e, set())
-                ok5 += bool(common)
-                if not any(e in unres[f + k] for k in range(window)):
-                    tot5r += 1
-                    ok5r += bool(common)
-        prev: Optional[set] = None
-        pf = -1
-        for f in range(len(on_edge)):
-            cur = on_edge[f].get(e)
-            if not cur:
-                continue
-            if prev:
-                sw_tot += 1
-                sw += not (prev & cur)
-                if e not in unres[pf] and e not in unres[f]:
-                    sw_totr += 1
-                    swr += not (prev & cur)
-                if all(g in fr_set for g in range(pf + 1, f)):
-                    sw_totv += 1
-                    swv += not (prev & cur)
-            prev, pf = cur, f
-    jumps = jump_tot = cross = 0
-    for seq in track_edges.values():
-        a = np.asarray(seq)
-        jump_tot += max(a.size - 1, 0)
-        jumps += int(np.count_nonzero(a[1:] != a[:-1]))
-        b = np.asarray([edge_body[e] for e in seq])
-        cross += int(np.count_nonzero(b[1:] != b[:-1]))
-    nan = float('nan')
-    return {
-        'tracked_5': ok5 / tot5 if tot5 else nan,
-        'windows': tot5,
-        'recall': rec / rec_tot if rec_tot else nan,
-        'id_switch_pct': 100.0 * sw / sw_tot if sw_tot else nan,
-        'transitions': sw_tot,
-        'id_jump_pct': 100.0 * jumps / jump_tot if jump_tot else nan,
-        'cross_body_jump_pct': 100.0 * cross / jump_tot if jump_tot else nan,
-        'line_err_px': float(np.median(line_errs)) if line_errs else nan,
-        'endpoint_err_px': float(np.median(end_errs)) if end_errs else nan,
-        'precision': n_hit / n_rep if n_rep else nan,
-        'tracked_5_resolvable': ok5r / tot5r if tot5r else nan,
-        'id_switch_pct_resolvable': 100.0 * swr / sw_totr if sw_totr else nan,
-        'unresolvable_window_pct': 100.0 * (tot5 - tot5r) / tot5 if tot5 else nan,
-        'id_switch_pct_in_view': 100.0 * swv / sw_totv if sw_totv else nan,
-        'transitions_in_view': sw_totv,
-    }
 
 
 # ---------------------------------------------------------------------------------- inputs
@@ -299,7 +81,7 @@ def detector_candidates() -> List[Tuple[str, Dict[str, object]]]:
                   ('FLD (contrib) 0.5', {'backend': 'fld', 'scale': 0.5}),
                   ('EDLines (contrib) 1.0', {'backend': 'edlines', 'scale': 1.0})]
     # the backends as they are; the tracker's default detector (resize 0.8 + LSD + bridge)
-    # and full-resolution LSD + bridge (the default until session 10) as rows
+    # and full-resolution LSD + bridge (the former default) as rows
     cands = [(name, dict(kw, bridge=False)) for name, kw in cands]
     cands.insert(1, ('LSD scale 1.0 + bridge', {'backend': 'lsd', 'scale': 1.0, 'bridge': True}))
     cands.insert(4, ('resize 0.8 + LSD + bridge (tracker default)',
@@ -314,7 +96,8 @@ def _now() -> float:
 # ---------------------------------------------------------------------------------- detectors
 def bench_detectors(seqs: Sequence[Tuple[str, object]], every: int = 3,
                     repeat: int = 3) -> List[Dict[str, object]]:
-    """Recall / precision / accuracy / time of each detector candidate on rendered frames.
+    """
+    Recall / precision / accuracy / time of each detector candidate on rendered frames.
 
     Times are wall-clock medians over ``repeat`` passes, interleaved with the raw OpenCV LSD
     default (``cv2.createLineSegmentDetector()``) on the same frame as the reference.
@@ -363,7 +146,8 @@ def bench_detectors(seqs: Sequence[Tuple[str, object]], every: int = 3,
 # ---------------------------------------------------------------------------------- tracking
 def run_tracker(make: Callable[[], LineTracker], frames: Sequence[np.ndarray],
                 reference: bool = True) -> Dict[str, object]:
-    """Run a fresh tracker over ``frames``: outputs and per-frame stage times (s).
+    """
+    Run a fresh tracker over ``frames``: outputs and per-frame stage times (s).
 
     With ``reference`` the raw OpenCV LSD default runs on every frame first (same run, same
     frame) as the timing reference. Wall-clock (``total``, ``detect``, ``track``, ``ref``) and
@@ -399,7 +183,8 @@ TRACKED_GOAL, SWITCH_GOAL_PCT = 0.90, 1.0
 
 
 def pooled_score(scores: Sequence[Dict[str, float]], key: str, weight: str) -> float:
-    """Pool ``key`` of :func:`score_tracks` results over sequences, weighted by ``weight``.
+    """
+    Pool ``key`` of :func:`score_tracks` results over sequences, weighted by ``weight``.
 
     E.g. ``tracked_5`` by ``windows`` (every edge window of every sequence counts once),
     ``id_switch_pct`` by ``transitions``; NaN when no sequence has a finite value.
@@ -416,7 +201,8 @@ def meets_goal(score: Dict[str, float]) -> bool:
 
 
 def pooled_row(scores: Sequence[Dict[str, float]]) -> List[object]:
-    """Tracking-table row over all sequences: ``tracked 5`` and id switches pooled.
+    """
+    Tracking-table row over all sequences: ``tracked 5`` and id switches pooled.
 
     ``tracked 5`` over every (edge, 5-frame window) of every sequence, id switches over every
     transition; the other columns are means of the per-sequence values.
@@ -540,7 +326,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--contrib-json', default=None,
                     help='detector rows measured in another venv (--detectors-only output) '
                          'to include in the report')
-    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results/frontend)')
     return ap.parse_args(list(argv))
 
 
@@ -633,16 +419,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                           float(np.percentile(life, 90)) if life.size else float('nan'),
                           int(life.size)])
         time_rows.append(_time_row(label, run))
-    out_dir = common.results_dir(args.out)
     contrib_rows = []
     if args.contrib_json:
         contrib_rows = json.loads(pathlib.Path(args.contrib_json).read_text())
     report = build_report(args, argv, det_rows, contrib_rows, track_rows, real_rows,
                           time_rows, _now() - t_start, make())
-    (out_dir / 'frontend.md').write_text(report)
-    plot(out_dir / 'frontend.png', track_runs, survival)
-    print(report)
-    common.eprint(f'frontend: wrote {out_dir / "frontend.md"} in {_now() - t_start:.0f} s')
+    plot(common.results_dir('frontend', args.out) / 'frontend.png', track_runs, survival)
+    common.write_report('frontend', args.out, report)
     return 0
 
 
@@ -651,14 +434,25 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
                  track_rows: Sequence[Sequence[object]], real_rows: Sequence[Sequence[object]],
                  time_rows: Sequence[Sequence[object]], seconds: float,
                  tracker: LineTracker) -> str:
-    """Markdown report of the front-end benchmark."""
+    """Return the Markdown report of the front-end benchmark."""
     command = common.command_line('frontend', argv)
     lines = [common.run_header(
         'Front end: line detection and tracking', command,
-        {'OpenCV': f'{cv2.__version__}, cv2.setNumThreads(1); timings are wall-clock on a '
-                   'shared machine: compare against the LSD reference measured in the same run',
+        {'Threads': 'cv2.setNumThreads(1); timings are wall-clock on a shared machine: '
+                    'compare against the LSD reference measured in the same run',
          'Tracker': f'LineTracker({tracker.config})',
          'Run time': f'{seconds:.0f} s'})]
+    lines += _detector_section(det_rows, contrib_rows)
+    lines += _tracking_section(track_rows, real_rows)
+    lines += _time_section(time_rows, tracker)
+    lines += ['![frontend](frontend.png)', '']
+    return '\n'.join(lines)
+
+
+def _detector_section(det_rows: Sequence[Dict[str, object]],
+                      contrib_rows: Sequence[Dict[str, object]]) -> List[str]:
+    """Return the report's lines on the detectors, and why the tracker's is chosen."""
+    lines: List[str] = []
     lines += ['## Detectors on rendered frames', '',
               'Every 3rd frame of the rendered sequences below. A detection matches a GT edge '
               'when within 3 deg, both ends of its overlap within 2 px of the GT line and at '
@@ -679,8 +473,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               'missed edge for several frames. '
               'LSD at full resolution (`scale=1.0`) has the best recall and the lowest line '
               'error of all candidates, at about 2x the cost of the OpenCV default. On the '
-              'image resized by 0.8 (area average, `lsd_resize`: the tracker default since '
-              'session 10) LSD detects fewer edges per call but it is cheaper, and in the '
+              'image resized by 0.8 (area average, `lsd_resize`: the tracker default) LSD '
+              'detects fewer edges per call but it is cheaper, and in the '
               'tracker, which refines and grows the lines it carries, it tracks as many edges '
               'as LSD 1.0 (the tracking table below; render seeds 0-9 in the docstring of '
               '`LineDetector`); the Gaussian sub-sampling of LSD itself at 0.8 tracks about 1 '
@@ -689,15 +483,23 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               'a tenth of the edges and doubles the line error. The contrib detectors (FLD, '
               'EDLines) are 2.5-3x cheaper than the LSD default, with recall per call between '
               'LSD 0.8 and LSD 0.5 and 2-3x the line error of LSD 1.0. In the tracker with '
-              '`bridge_crossings` (session 11), FLD at full resolution tracks about as many '
+              '`bridge_crossings`, FLD at full resolution tracks about as many '
               'edges as the default (`tracked 5` / id switches, render seeds 0-3: 0.930 / '
-              '0.52% vs 0.937 / 0.53%, `frontend_fld/`; seeds 4-9: 0.937 / 0.48% vs 0.931 / '
+              '0.52% vs 0.937 / 0.53%, `--backend fld --scale 1.0`; seeds 4-9: 0.937 / 0.48% '
+              'vs 0.931 / '
               '0.52%) for about a third less front-end CPU per frame (mean), with ~30% larger '
               'line errors, about twice the endpoint error, own_centre s0 at 1.29% id '
               'switches and 10-15% fewer segments on two of the real sequences; the node '
               'offers it as `detector_backend:=fld` (with `detector_scale:=1.0`; it needs '
               'opencv-contrib-python-headless in place of opencv-python-headless). Without '
               '`bridge_crossings` FLD and EDLines track 5 points fewer edges.', '']
+    return lines
+
+
+def _tracking_section(track_rows: Sequence[Sequence[object]],
+                      real_rows: Sequence[Sequence[object]]) -> List[str]:
+    """Return the report's lines on tracking, rendered (scored) and real sequences."""
+    lines: List[str] = []
     lines += ['## Tracking on rendered sequences (640x480, background + boxes)', '',
               '`tracked 5` = share of (GT edge >= 30 px, 5 consecutive frames in which it is '
               'visible) with one track id on the edge in all 5 frames. `id switch` = % of '
@@ -732,6 +534,12 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
               common.markdown_table(
                   ['sequence', 'segments / frame', 'track lifetime median (frames)',
                    'lifetime p90', 'tracks'], real_rows)]
+    return lines
+
+
+def _time_section(time_rows: Sequence[Sequence[object]], tracker: LineTracker) -> List[str]:
+    """Return the report's lines on the time per frame, against the LSD reference."""
+    lines: List[str] = []
     lines += ['## Time per frame (one thread)', '',
               'Wall-clock ms per frame on a shared 2-core machine, so read them against '
               '`LSD ref`: the raw OpenCV LSD default (`cv2.createLineSegmentDetector()`) run on '
@@ -745,8 +553,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
                    'total median', 'total p95', 'total mean', 'LSD ref median',
                    'median / LSD', 'mean / LSD', 'CPU total median', 'CPU total mean',
                    'CPU LSD ref'], time_rows)]
-    lines += ['![frontend](frontend.png)', '']
-    return '\n'.join(lines)
+    return lines
 
 
 if __name__ == '__main__':

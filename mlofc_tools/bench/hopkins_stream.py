@@ -14,7 +14,7 @@
 """Hopkins155 line tracks streamed through `general`'s warm path, as the node solves them.
 
 ``python -m mlofc_tools.bench hopkins_stream [--motions 3] [--sequences ...] [--variants ...]
-[--out DIR]`` writes ``hopkins_stream.md`` to ``docs/results/`` (or ``--out``) and prints it
+[--out DIR]`` writes ``README.md`` to ``docs/results/hopkins_stream/`` (or ``--out``), prints it
 (the 35 three-motion sequences by default, ~22 min on 2 cores).
 
 `bench hopkins` solves each K-frame window cold. A node sees the sequence as a stream: one
@@ -48,8 +48,8 @@ import zlib
 import numpy as np
 
 from mlofc_tools.bench import common
-from mlofc_tools.bench.hopkins import (LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX, n_motions_of,
-                                     pick_sequences, solver_state)
+from mlofc_tools.bench.hopkins_runs import (LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX,
+                                            n_motions_of, pick_sequences)
 from mlofc_tools.datasets import hopkins as hk
 
 #: Frames per window (`bench hopkins`'s K = 5).
@@ -180,7 +180,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--quick', action='store_true',
                    help=f'smoke run: {QUICK_SEQUENCE}, 3 windows, every variant, one process')
     p.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1))
-    p.add_argument('--out', default=None, help='output folder (default docs/results)')
+    p.add_argument('--out', default=None,
+                   help='output folder (default docs/results/hopkins_stream)')
     args = p.parse_args(list(argv))
     if args.quick:
         args.sequences, args.windows, args.jobs = QUICK_SEQUENCE, 3, 1
@@ -216,15 +217,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                           common.command_line('hopkins_stream', argv), {
                               'Sequences': f'{len(paths)}; K = {K}',
                               'Run time': f'{seconds:.0f} s wall with {args.jobs} worker '
-                                          'process(es)',
-                              'Solver': solver_state()}),
+                                          'process(es)'}),
         __doc__.split('\n\n', 2)[2].strip(), '',
         '## Misclassification %, mean (median) over sequences', '', summary_table(records), '',
         "Every window: the mean over the sequence's windows (the first one cold). Middle and "
         'last: the window at the middle / end of the sequence, streamed, against the cold '
         'search on the same lines and frames.', '',
         '## Per sequence', '', sequence_table(records), ''])
-    out_dir = common.results_dir(args.out)
-    (out_dir / 'hopkins_stream.md').write_text(report)
-    print(report)
+    common.write_report('hopkins_stream', args.out, report)
     return 0

@@ -11,9 +11,10 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Spinning boxes through the running node in real time: a slow solver at camera rates.
+"""
+Spinning boxes through the running node in real time: a slow solver at camera rates.
 
-Run ``python -m mlofc_tools.bench live``; writes ``docs/results/live.md``. Where ``bench
+Run ``python -m mlofc_tools.bench live``; writes ``docs/results/live/``. Where ``bench
 spinning`` feeds every frame to :class:`~mlofc_ros.pipeline.Pipeline` and waits for each
 answer, this one publishes the same rendered scenes to ``mlofc_node`` (its own process, fresh
 ``ROS_DOMAIN_ID``, started like ``bench ros``) at a fixed rate, as a camera or a bag played in
@@ -61,7 +62,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--drain-timeout', type=float, default=120.0)
     ap.add_argument('--quick', action='store_true',
                     help='smoke run: own2, seed 0, 10 Hz, 15 frames, window 5')
-    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results/live)')
     args = ap.parse_args(list(argv))
     if args.quick:
         args.scenes, args.seeds, args.rates, args.frames, args.window = \
@@ -145,7 +146,7 @@ def answers(bench: LiveBench, stamps: Sequence[int], n_bodies: int) -> List[Any]
 def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
             ) -> Dict[str, Any]:
     """One fresh node, one scene published at ``rate``; counts and scores."""
-    from mlofc_tools.demo import fresh_domain_id
+    from mlofc_tools.demo_node import fresh_domain_id
     n_bodies = len(seq.body_names)
     domain = fresh_domain_id()
     stats_path = work / f'stats_{domain}.json'
@@ -222,8 +223,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from mlofc_tools.render import render_sequence
     t0 = time.monotonic()
     load = os.getloadavg()
-    from mlofc_tools.bench.pipeline import code_revisions
-    revisions = code_revisions()        # before the runs: the code they ran
+    revision = common.commit()        # before the runs: the code they ran
     records = []
     with tempfile.TemporaryDirectory(prefix='mlofc_live_') as tmp:
         for scene in args.scene_list:
@@ -240,14 +240,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     text = '\n'.join([
         common.run_header('Spinning boxes through the running node, published in real time',
                           common.command_line('live', argv), {
-                              'Code': revisions,
                               'Node': f'`method:={args.method} window:={args.window} '
                                       'queue_size:=2`, camera_info given; a fresh node per run',
                               'Sequences': f'{args.frames} frames 640x480 per run (image '
                                            'stamps 30 frames/s), published at each rate on a '
                                            'steady clock',
                               'Wall time': f'{time.monotonic() - t0:.0f} s; load average '
-                                           f'(1 min) at start {load[0]:.1f}'}),
+                                           f'(1 min) at start {load[0]:.1f}'}, revision),
         '## Over the seeds',
         '',
         common.markdown_table(['scene', 'rate Hz', 'runs', 'wrong % (mean)', 'wrong % (worst)',
@@ -262,7 +261,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         '',
         __doc__.split('\n\n', 1)[1].strip(),
         ''])
-    common.write_report(args.out, 'live.md', text)
+    common.write_report('live', args.out, text)
     return 0
 
 

@@ -11,11 +11,12 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The paper's synthetic experiments (section 4.1, Fig. 2-5), rerun for every solver method.
+"""
+The paper's synthetic experiments (section 4.1, Fig. 2-5), rerun for every solver method.
 
 ``python -m mlofc_tools.bench paper [--trials 50] [--quick] [--out DIR] [--jobs 2]`` writes
-``paper.md`` and ``paper_fig2.png`` .. ``paper_fig5.png`` to ``docs/results/`` (or ``--out``) and
-prints the tables.
+``README.md`` and ``paper_fig2.png`` .. ``paper_fig5.png`` to ``docs/results/paper/`` (or
+``--out``) and prints the tables.
 
 - Fig. 2: n = 2 bodies, 20 lines each, noise 0..2 px, pure rotation.
 - Fig. 3: n = 2, 20 lines each, 1 px, both bodies also translate, ``|T| = t |w|``.
@@ -41,6 +42,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from mlofc_tools.bench import common
+from mlofc_tools.scoring import best_permutation, motion_errors
 from mlofc_tools.synthetic import make_scene
 
 FLOOR = 'floor (unweighted)'
@@ -116,7 +118,8 @@ class Unit:
 
 def runner_names(exp: Experiment, n_frames: int, methods: Sequence[str],
                  multi: Sequence[str] = MULTI_FRAME_METHODS) -> Tuple[str, ...]:
-    """Names of what runs on a scene: methods, floors and (Fig. 2, two views) f-unknown runs.
+    """
+    Names of what runs on a scene: methods, floors and (Fig. 2, two views) f-unknown runs.
 
     ``methods`` run on two-view scenes, those of them also in ``multi`` on K-view scenes.
     """
@@ -133,9 +136,8 @@ def runner_names(exp: Experiment, n_frames: int, methods: Sequence[str],
 def _score(result: object, scene: object) -> Dict[str, float]:
     """Misclassification, motion errors and focal-length error of one solver result."""
     n = scene.n_bodies
-    perm, errors = common.best_permutation(result.labels, scene.labels, n)
-    rel, abs_deg = common.motion_errors(result.angular_velocities, scene.angular_velocities,
-                                        perm)
+    perm, errors = best_permutation(result.labels, scene.labels, n)
+    rel, abs_deg = motion_errors(result.angular_velocities, scene.angular_velocities, perm)
     # error of the true body n-1 (the pure-translation body of Fig. 4), deg/frame
     inv = {t: p for p, t in enumerate(perm)}
     last = float(np.degrees(np.linalg.norm(
@@ -447,8 +449,8 @@ HOW_TO_READ = """\
 
 def build_report(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
                  errors: Dict[str, List[str]], methods: Sequence[str], args: argparse.Namespace,
-                 command: str, seconds: float, revision: str = 'unknown') -> str:
-    """Whole Markdown report; ``revision`` names the solver code the run imported."""
+                 command: str, seconds: float, revision: Optional[str] = None) -> str:
+    """Return the whole Markdown report; ``revision``: the commit the run imported."""
     cpu = sum(s['cpu_total'] for s in stats.values())
     extra = {'Trials per point': str(args.trials), 'Methods': ', '.join(methods),
              f'Methods on the {args.frames}-view scenes': ', '.join(
@@ -456,9 +458,9 @@ def build_report(exps: Sequence[Experiment], stats: Dict[Key, Dict[str, float]],
              'Run time': f'{seconds:.0f} s wall with {args.jobs} worker process(es); '
                          f'{cpu:.0f} s CPU in the solver calls (the wall time depends on what '
                          f'else the machine runs; CPU / workers is the uncontended estimate)',
-             'Base seed': str(args.seed),
-             'Solver revision (at the start of the run)': revision}
-    parts = [common.run_header('Paper experiments (section 4.1, Fig. 2-5)', command, extra)]
+             'Base seed': str(args.seed)}
+    parts = [common.run_header('Paper experiments (section 4.1, Fig. 2-5)', command, extra,
+                               revision)]
     head = headline(exps, stats, methods, args.frames, args.multi)
     if head:
         parts += ['## Headline: misclassification %, mean over trials', '', head]
@@ -487,7 +489,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                    help='scenes per point (default 50; 2 with --quick)')
     p.add_argument('--quick', action='store_true',
                    help='smoke run: 2 points per figure, 2 trials, K=3 extra views')
-    p.add_argument('--out', default=None, help='output folder (default docs/results)')
+    p.add_argument('--out', default=None, help='output folder (default docs/results/paper)')
     p.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1),
                    help='worker processes (default min(2, cores))')
     p.add_argument('--seed', type=int, default=2007, help='base seed (default 2007)')
@@ -519,7 +521,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the benchmark; returns the process exit code."""
     argv = list(argv or [])
     args = parse_args(argv)
-    revision = common.git_revision('mlofc_ros/solver')  # the code imported next
+    revision = common.commit()  # the code imported next
     from mlofc_ros.solver import METHODS
 
     methods = list(METHODS) if args.methods is None else [
@@ -533,7 +535,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if not exps:
         common.eprint(f'no experiment selected by --figs {args.figs!r}')
         return 2
-    out_dir = common.results_dir(args.out)
+    out_dir = common.results_dir('paper', args.out)
     units = make_units(exps, methods, args.trials, args.frames, args.seed, args.multi)
     # biggest scenes first so the pool ends evenly
     units.sort(key=lambda u: -(u.n_frames * u.exp.n_bodies ** 2 * len(u.runners)))
@@ -546,10 +548,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     stats, errors = aggregate(results)
     command = common.command_line('paper', argv)
     report = build_report(exps, stats, errors, methods, args, command, seconds, revision)
-    (out_dir / 'paper.md').write_text(report)
     for exp in exps:
         plot_experiment(exp, stats, methods, args.frames, out_dir / f'paper_{exp.key}.png',
                         args.multi)
-    print(report)
-    common.eprint(f'paper: wrote {out_dir / "paper.md"} and {len(exps)} plots in {seconds:.0f} s')
+    common.write_report('paper', args.out, report)
     return 0

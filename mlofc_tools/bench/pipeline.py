@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Per-stage timings of the per-frame pipeline, against OpenCV's LSD alone on the same frames.
+"""
+Per-stage timings of the per-frame pipeline, against OpenCV's LSD alone on the same frames.
 
 For every frame of every sequence, in this order and single-threaded (``cv2.setNumThreads(1)``,
 one BLAS thread): decode a ``sensor_msgs/Image``-like object (mono8, and bgr8 separately) with
@@ -25,7 +26,8 @@ even when absolute milliseconds are not.
 Sequences: rendered boxes + background (640x480 and 1280x720 by default) and the real sequences
 under ``--real-dir`` (``*/frames/*.png``; visp_cube's ``cube.xml`` gives its intrinsics, the
 others have none so the solver estimates the focal length). Statistics skip the first
-``window`` frames (window filling). Writes ``pipeline.md`` and ``pipeline.png``.
+``window`` frames (window filling). Writes ``README.md`` and ``pipeline.png``
+to ``docs/results/pipeline/``.
 
 Run ``python -m mlofc_tools.bench pipeline``.
 """
@@ -33,6 +35,7 @@ import argparse
 import glob
 import math
 import os
+import pathlib
 import re
 import sys
 import time
@@ -56,19 +59,6 @@ GOAL_RATIO = 0.5
 
 class Sequence_(SimpleNamespace):
     """A named list of gray frames, their stamps (s), a camera or None, and num_bodies."""
-
-
-def code_revisions() -> str:
-    """Last commits (``+dirty`` if edited) of the code this benchmark runs, for the report.
-
-    The whole package first: a module left out of the list (``bodies.py`` was, session 20)
-    would change the results under an unchanged revision.
-    """
-    return ', '.join(f'{name} {common.git_revision(path)}' for name, path in (
-        ('mlofc_ros', 'mlofc_ros'), ('pipeline', 'mlofc_ros/pipeline.py'),
-        ('solver', 'mlofc_ros/solver'),
-        ('tracks', 'mlofc_ros/tracks'), ('detect', 'mlofc_ros/segments'),
-        ('node', 'mlofc_ros/node.py')))
 
 
 def read_visp_camera(path: str) -> Optional[Tuple[float, float, float, float]]:
@@ -129,7 +119,8 @@ def image_message(img: np.ndarray, encoding: str) -> SimpleNamespace:
 
 def run_sequence(seq: Sequence_, params: Optional[Dict[str, object]] = None
                  ) -> Dict[str, np.ndarray]:
-    """Time every stage on every frame of ``seq``; returns ms arrays per key (one per frame).
+    """
+    Time every stage on every frame of ``seq``; returns ms arrays per key (one per frame).
 
     ``params``: :class:`Pipeline` parameters (node names) on top of the defaults.
 
@@ -186,7 +177,8 @@ def run_sequence(seq: Sequence_, params: Optional[Dict[str, object]] = None
 
 def count_calls(seq: Sequence_, params: Optional[Dict[str, object]] = None
                 ) -> Dict[str, np.ndarray]:
-    """Python-level calls per frame of ``Pipeline.process`` on ``seq`` (cProfile's count).
+    """
+    Python-level calls per frame of ``Pipeline.process`` on ``seq`` (cProfile's count).
 
     Every function call the profiler sees, numpy's and OpenCV's C functions included: at the
     pipeline's sizes each costs mostly its fixed overhead, so the count is the part of a
@@ -270,7 +262,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                          'first rendered sequence)')
     ap.add_argument('--quick', action='store_true',
                     help='smoke run: 7 frames of 320x240, no real sequence')
-    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results/pipeline)')
     args = ap.parse_args(list(argv))
     args.params = common.parse_param_option(ap, args)
     if args.method:
@@ -288,7 +280,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
 
 def plot(path: 'os.PathLike', names: Sequence[str], med: Dict[str, Dict[str, float]],
          estimated_f: Sequence[bool]) -> None:
-    """Stacked bars of the median stage times per sequence, LSD alone next to each.
+    """
+    Stacked bars of the median stage times per sequence, LSD alone next to each.
 
     Sequences with a known camera and those whose focal length is estimated (much slower
     solver) go on separate panels, each with its own scale.
@@ -327,6 +320,7 @@ def plot(path: 'os.PathLike', names: Sequence[str], med: Dict[str, Dict[str, flo
 def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[Sequence_],
                  res: Dict[str, Dict[str, np.ndarray]], skip: int, wall: float,
                  calls: Optional[Dict[str, Dict[str, np.ndarray]]] = None) -> str:
+    """Return the Markdown report of the timed runs ``res`` (and the call counts ``calls``)."""
     head = common.run_header(
         'Pipeline: per-stage timings vs LSD alone', common.command_line('pipeline', argv),
         {'Threads': 'single (`cv2.setNumThreads(1)`, one BLAS thread); the machine is shared, '
@@ -334,75 +328,12 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
                     'same frames, not absolute ms across runs',
          'Parameters': ', '.join(f'`{k}:={v}`' for k, v in args.params.items())
                        or 'node defaults',
-         'Code (at start)': args.code,
          'Wall time': f'{wall:.0f} s',
-         'Load average (1 min) at start / end': f'{args.load:.1f} / {os.getloadavg()[0]:.1f}'})
-    names = [s.name for s in seqs]
-    lines = [head]
-    rows, stage_rows, split_rows = [], [], []
-    for s in seqs:
-        r = {k: _steady(v, skip) for k, v in res[s.name].items()}
-        split_rows.append([s.name] + _split_row(r))
-        ratio = _med(r['total']) / _med(r['lsd'])
-        h, w = s.frames[0].shape
-        cam = 'given' if s.camera is not None else 'none (f estimated)'
-        rows.append([s.name, f'{w}x{h}', len(r['total']), s.num_bodies, cam,
-                     _med(r['tracks']), _med(r['total']), _p95(r['total']),
-                     _med(r['end_to_end']), _med(r['lsd']), _p95(r['lsd']), ratio,
-                     _med(r['end_to_end']) / _med(r['lsd']), _med(r['total_cpu']),
-                     _med(r['lsd_cpu']), _med(r['total_cpu']) / _med(r['lsd_cpu']),
-                     _med(r['detect_track']) / _med(r['lsd']),
-                     _med(r['solve']) / _med(r['total']),
-                     float(np.mean(r['total'])), float(np.mean(r['lsd'])),
-                     float(np.mean(r['total']) / np.mean(r['lsd'])),
-                     f"{int(r['detected'].sum())} / {len(r['detected'])}"])
-        stage_rows.append([s.name] + [f'{_med(r[k]):.3g} / {_p95(r[k]):.3g}' for k in (
-            'decode', 'decode_bgr8', 'detect_track', 'undistort', 'window', 'other', 'solve',
-            'pack', 'total', 'lsd')])
-    first = next((rw for rw in rows if rw[1] == '640x480' and rw[0].startswith('rendered')),
-                 rows[0] if rows else None)
-    if first is not None:
-        verdict = 'met' if first[11] <= GOAL_RATIO else 'NOT met'
-        verdict_mean = 'met' if first[20] <= GOAL_RATIO else 'NOT met'
-        lines += ['## Headline', '',
-                  f'- {first[0]}: `Pipeline.process` median **{first[6]:.1f} ms** (p95 '
-                  f'{first[7]:.1f}), LSD alone {first[9]:.1f} ms on the same frames: ratio '
-                  f'**{first[11]:.2f}** (goal <= {GOAL_RATIO:g} on the median: {verdict}); '
-                  f'decode + process + '
-                  f'pack {first[8]:.1f} ms.',
-                  f'- Same frames in CPU time (`time.thread_time`, less sensitive to the load '
-                  f'of the shared machine): process {first[13]:.1f} ms, LSD {first[14]:.1f} ms, '
-                  f'ratio **{first[15]:.2f}**.',
-                  f'- The front end alone (detect/track) is {first[16]:.2f} x LSD; the solver '
-                  f'takes {100 * first[17]:.0f} % of `Pipeline.process` (median ratio).',
-                  f'- Throughput (mean over frames, which counts the detection frames: the '
-                  f'tracker runs the detector on {first[21]} frames here): process '
-                  f'{first[18]:.1f} ms ({1000.0 / first[18]:.0f} frames/s), LSD '
-                  f'{first[19]:.1f} ms: ratio of means **{first[20]:.2f}** (goal <= '
-                  f'{GOAL_RATIO:g} on the mean: {verdict_mean}).', '']
-    lines += ['## Whole pipeline vs LSD', '',
-              common.markdown_table(
-                  ['sequence', 'size', 'frames', 'bodies', 'camera', 'tracks (median)',
-                   'process median ms', 'process p95 ms', 'decode+process+pack median ms',
-                   'LSD median ms', 'LSD p95 ms', 'process / LSD', 'end-to-end / LSD',
-                   'process CPU ms', 'LSD CPU ms', 'process / LSD (CPU)',
-                   'detect/track / LSD', 'solve share', 'process mean ms', 'LSD mean ms',
-                   'process / LSD (means)', 'detection frames'], rows),
-              f'Statistics over frames >= {skip} (the first `window` frames fill the window). '
-              'Ratios are of medians unless marked means. `process` is `Pipeline.process` '
-              '(`timings["total"]`); CPU '
-              'columns are the same calls timed with `time.thread_time` (the machine is shared: '
-              'wall time includes waiting for a core). Solve share = median solve / median '
-              'process.', '',
-              '## Where the mean goes: frames with and without detection', '',
-              common.markdown_table(
-                  ['sequence', 'detection frames', 'median ms', 'x LSD (median)',
-                   'share of process time', 'other frames', 'median ms', 'x LSD (median)',
-                   'share of process time'], split_rows),
-              'A frame runs the detector when the tracker asks for it (detection on demand: '
-              'every `detect_every`-th frame while new edges appear, up to every '
-              '`detect_every_max`-th in a quiet scene). x LSD: the median '
-              '`Pipeline.process` over the median LSD of all frames.', '']
+         'Load average (1 min) at start / end': f'{args.load:.1f} / {os.getloadavg()[0]:.1f}'},
+        args.code)
+    rows, stage_rows, split_rows = _table_rows(seqs, res, skip)
+    lines = [head] + _headline(rows)
+    lines += _pipeline_tables(rows, split_rows, skip)
     calls_rows = _calls_rows(seqs, res, calls or {}, skip)
     if calls_rows:
         lines += ['## Calls per frame (machine-independent)', '',
@@ -428,27 +359,111 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], seqs: Sequence[S
               '- LSD alone: `cv2.createLineSegmentDetector().detect` (default parameters, '
               'full resolution) on the same gray frame, timed right after the pipeline.', '',
               '![stages](pipeline.png)', '']
-    plot(common.results_dir(args.out) / 'pipeline.png', names,
+    return '\n'.join(lines)
+
+
+def _table_rows(seqs: Sequence[Sequence_], res: Dict[str, Dict[str, np.ndarray]], skip: int
+                ) -> Tuple[List[List[object]], List[List[object]], List[List[object]]]:
+    """Return the rows of the whole-pipeline, stage and detection-split tables."""
+    rows, stage_rows, split_rows = [], [], []
+    for s in seqs:
+        r = {k: _steady(v, skip) for k, v in res[s.name].items()}
+        split_rows.append([s.name] + _split_row(r))
+        ratio = _med(r['total']) / _med(r['lsd'])
+        h, w = s.frames[0].shape
+        cam = 'given' if s.camera is not None else 'none (f estimated)'
+        rows.append([s.name, f'{w}x{h}', len(r['total']), s.num_bodies, cam,
+                     _med(r['tracks']), _med(r['total']), _p95(r['total']),
+                     _med(r['end_to_end']), _med(r['lsd']), _p95(r['lsd']), ratio,
+                     _med(r['end_to_end']) / _med(r['lsd']), _med(r['total_cpu']),
+                     _med(r['lsd_cpu']), _med(r['total_cpu']) / _med(r['lsd_cpu']),
+                     _med(r['detect_track']) / _med(r['lsd']),
+                     _med(r['solve']) / _med(r['total']),
+                     float(np.mean(r['total'])), float(np.mean(r['lsd'])),
+                     float(np.mean(r['total']) / np.mean(r['lsd'])),
+                     f"{int(r['detected'].sum())} / {len(r['detected'])}"])
+        stage_rows.append([s.name] + [f'{_med(r[k]):.3g} / {_p95(r[k]):.3g}' for k in (
+            'decode', 'decode_bgr8', 'detect_track', 'undistort', 'window', 'other', 'solve',
+            'pack', 'total', 'lsd')])
+    return rows, stage_rows, split_rows
+
+
+def _headline(rows: Sequence[Sequence[object]]) -> List[str]:
+    """Return the headline: the first rendered 640x480 sequence against the goal."""
+    first = next((rw for rw in rows if rw[1] == '640x480' and rw[0].startswith('rendered')),
+                 rows[0] if rows else None)
+    if first is None:
+        return []
+    verdict = 'met' if first[11] <= GOAL_RATIO else 'NOT met'
+    verdict_mean = 'met' if first[20] <= GOAL_RATIO else 'NOT met'
+    return ['## Headline', '',
+            f'- {first[0]}: `Pipeline.process` median **{first[6]:.1f} ms** (p95 '
+            f'{first[7]:.1f}), LSD alone {first[9]:.1f} ms on the same frames: ratio '
+            f'**{first[11]:.2f}** (goal <= {GOAL_RATIO:g} on the median: {verdict}); '
+            f'decode + process + '
+            f'pack {first[8]:.1f} ms.',
+            f'- Same frames in CPU time (`time.thread_time`, less sensitive to the load '
+            f'of the shared machine): process {first[13]:.1f} ms, LSD {first[14]:.1f} ms, '
+            f'ratio **{first[15]:.2f}**.',
+            f'- The front end alone (detect/track) is {first[16]:.2f} x LSD; the solver '
+            f'takes {100 * first[17]:.0f} % of `Pipeline.process` (median ratio).',
+            f'- Throughput (mean over frames, which counts the detection frames: the '
+            f'tracker runs the detector on {first[21]} frames here): process '
+            f'{first[18]:.1f} ms ({1000.0 / first[18]:.0f} frames/s), LSD '
+            f'{first[19]:.1f} ms: ratio of means **{first[20]:.2f}** (goal <= '
+            f'{GOAL_RATIO:g} on the mean: {verdict_mean}).', '']
+
+
+def _pipeline_tables(rows: Sequence[Sequence[object]], split_rows: Sequence[Sequence[object]],
+                     skip: int) -> List[str]:
+    """Return the whole-pipeline table and the split by detection frames."""
+    return ['## Whole pipeline vs LSD', '',
+            common.markdown_table(
+                ['sequence', 'size', 'frames', 'bodies', 'camera', 'tracks (median)',
+                 'process median ms', 'process p95 ms', 'decode+process+pack median ms',
+                 'LSD median ms', 'LSD p95 ms', 'process / LSD', 'end-to-end / LSD',
+                 'process CPU ms', 'LSD CPU ms', 'process / LSD (CPU)',
+                 'detect/track / LSD', 'solve share', 'process mean ms', 'LSD mean ms',
+                 'process / LSD (means)', 'detection frames'], rows),
+            f'Statistics over frames >= {skip} (the first `window` frames fill the window). '
+            'Ratios are of medians unless marked means. `process` is `Pipeline.process` '
+            '(`timings["total"]`); CPU '
+            'columns are the same calls timed with `time.thread_time` (the machine is shared: '
+            'wall time includes waiting for a core). Solve share = median solve / median '
+            'process.', '',
+            '## Where the mean goes: frames with and without detection', '',
+            common.markdown_table(
+                ['sequence', 'detection frames', 'median ms', 'x LSD (median)',
+                 'share of process time', 'other frames', 'median ms', 'x LSD (median)',
+                 'share of process time'], split_rows),
+            'A frame runs the detector when the tracker asks for it (detection on demand: '
+            'every `detect_every`-th frame while new edges appear, up to every '
+            '`detect_every_max`-th in a quiet scene). x LSD: the median '
+            '`Pipeline.process` over the median LSD of all frames.', '']
+
+
+def _plot_stages(path: pathlib.Path, seqs: Sequence[Sequence_],
+                 res: Dict[str, Dict[str, np.ndarray]], skip: int) -> None:
+    """Plot the median stage times of every sequence against LSD."""
+    plot(path, [s.name for s in seqs],
          {s.name: dict({k: _med(_steady(res[s.name][k], skip)) for k, _ in STAGES},
                        lsd=_med(_steady(res[s.name]['lsd'], skip)),
                        ratio=_med(_steady(res[s.name]['total'], skip))
                        / _med(_steady(res[s.name]['lsd'], skip)),
                        estimated_f=s.camera is None) for s in seqs},
          [s.camera is None for s in seqs])
-    return '\n'.join(lines)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     argv = list(argv or [])
     args = parse_args(argv)
     args.load = os.getloadavg()[0]
-    args.code = code_revisions()
+    args.code = common.commit()       # before the runs import the code
     import cv2
     cv2.setNumThreads(1)
     from mlofc_ros import params
 
     t0 = time.monotonic()
-    out = common.results_dir(args.out)
     common.eprint('pipeline: rendering', ', '.join(f'{w}x{h}' for w, h in args.wh))
     seqs = rendered_sequences(args.wh, args.frames, args.boxes, args.seed)
     if args.real_frames > 0 and args.real_dir:
@@ -465,8 +480,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         common.eprint(f'pipeline: counting calls on {seqs[0].name}')
         calls[seqs[0].name] = count_calls(seqs[0], args.params)
     report = build_report(args, argv, seqs, res, skip, time.monotonic() - t0, calls)
-    (out / 'pipeline.md').write_text(report)
-    print(report)
+    _plot_stages(common.results_dir('pipeline', args.out) / 'pipeline.png', seqs, res, skip)
+    common.write_report('pipeline', args.out, report)
     return 0
 
 

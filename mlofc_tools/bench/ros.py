@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The running node under rising image rates: drops, throughput and latency over DDS.
+"""
+The running node under rising image rates: drops, throughput and latency over DDS.
 
 ``mlofc_node`` runs in its own process on a fresh ``ROS_DOMAIN_ID`` (localhost discovery). It is
 started through a thin wrapper (``python -m mlofc_tools.bench.ros --child STATS -- --ros-args
@@ -27,7 +28,8 @@ waits for the node to drain, and counts the ``~/segments`` messages received (re
 Latency = reception wall time - image stamp (both clocks of this process). A rate is kept up
 with when every published frame is answered and the node dropped none.
 
-Run ``python -m mlofc_tools.bench ros``; writes ``ros.md`` and ``ros.png``.
+Run ``python -m mlofc_tools.bench ros``; writes ``README.md`` and ``ros.png`` to
+``docs/results/ros/``.
 """
 import argparse
 import contextlib
@@ -69,7 +71,8 @@ def proc_times_path(stats_path: Union[str, pathlib.Path]) -> str:
 
 def read_proc_times(stats_path: Union[str, pathlib.Path], start: int, stop: int
                     ) -> Tuple[np.ndarray, np.ndarray]:
-    """Return the process wall and CPU ms (each ``(stop - start,)`` at most) of solved frames.
+    """
+    Return the process wall and CPU ms (each ``(stop - start,)`` at most) of solved frames.
 
     Frames ``start .. stop - 1`` in the order the node solved them (``n_proc`` of two stats
     dumps); empty before the node has written any.
@@ -83,7 +86,8 @@ def read_proc_times(stats_path: Union[str, pathlib.Path], start: int, stop: int
 
 
 def child_main(stats_path: str, ros_args: Sequence[str]) -> int:
-    """Run ``MlofcNode`` like ``mlofc_node`` does, dumping ``node.stats`` to ``stats_path``.
+    """
+    Run ``MlofcNode`` like ``mlofc_node`` does, dumping ``node.stats`` to ``stats_path``.
 
     The process time of every solved frame is appended to :func:`proc_times_path` as it is
     dumped: a JSON dump of the whole history every 0.1 s took the executor thread about a
@@ -177,7 +181,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--domain-id', type=int, default=None)
     ap.add_argument('--quick', action='store_true',
                     help='smoke run: 5 and 10 Hz, 4 frames of 320x240')
-    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results/ros)')
     args = ap.parse_args(list(argv))
     if args.quick:
         args.rates, args.frames, args.size = '5,10', 4, '320x240'
@@ -303,12 +307,11 @@ def _wait(cond: Any, timeout: float, step: float = 0.05) -> bool:
 
 def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
     """Start the node, sweep the rates; returns the per-rate rows and run facts."""
-    from mlofc_tools.demo import fresh_domain_id
+    from mlofc_tools.demo_node import fresh_domain_id
     from mlofc_tools.render import render_sequence
 
     load = os.getloadavg()
-    from mlofc_tools.bench.pipeline import code_revisions
-    code = code_revisions()
+    code = common.commit()            # before the node imports the code
     domain = args.domain_id if args.domain_id is not None else fresh_domain_id()
     common.eprint(f'ros: rendering {args.frames} frames {args.wh[0]}x{args.wh[1]}')
     seq = render_sequence(args.boxes, min(args.frames, 120), size=args.wh,
@@ -340,14 +343,15 @@ def run(args: argparse.Namespace, work: pathlib.Path) -> Dict[str, Any]:
 def running_node(ros_args: Sequence[str], domain: int, stats_path: pathlib.Path,
                  log_path: pathlib.Path, make_bench: Callable[[], Bench],
                  startup_timeout: float) -> Iterator[Tuple[Bench, Any, float, List[str]]]:
-    """Run the node (``--child``, writing ``stats_path``) on ``domain`` with ``ros_args``.
+    """
+    Run the node (``--child``, writing ``stats_path``) on ``domain`` with ``ros_args``.
 
     Yields ``(bench, process, startup seconds, command)`` once the node subscribes to the
     image topic and publishes ``~/segments``; ``make_bench`` builds the publishing side (in
     this process's environment set to the domain). Raises :class:`BenchError` when the node
     does not come up in ``startup_timeout`` s. The environment is restored afterwards.
     """
-    from mlofc_tools.demo import NodeProcess
+    from mlofc_tools.demo_node import NodeProcess
     command = [sys.executable, '-m', 'mlofc_tools.bench.ros', '--child', str(stats_path),
                '--ros-args', '-r', f'__node:={NODE_NAME}', '-r', f'image:={IMAGE_TOPIC}',
                '-r', f'camera_info:={INFO_TOPIC}', *ros_args]
@@ -439,7 +443,8 @@ def kept_up(row: Dict[str, Any]) -> bool:
 
 
 def rate_headline(rows: Sequence[Dict[str, Any]]) -> str:
-    """Headline line: the highest rate kept up with, at it and every lower rate (rising rows).
+    """
+    Headline line: the highest rate kept up with, at it and every lower rate (rising rows).
 
     When the node keeps up with every rate run, the limit is above the highest: the line says
     so instead of calling that rate the limit.
@@ -494,10 +499,9 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], res: Dict[str, A
          'Input': f'{args.wh[0]}x{args.wh[1]} rendered boxes + background, mono8, '
                   f'{args.frames} frames per rate, sensor-data QoS, CameraInfo before each '
                   'image; 4 warm-up frames at 2 Hz not counted',
-         'Code (at start)': res['code'],
          'Wall time': f'{wall:.0f} s on a shared 2-core machine (bench and node compete for it)',
          'Load average (1 min) at start / end':
-             f'{res["load"][0]:.1f} / {os.getloadavg()[0]:.1f}'})
+             f'{res["load"][0]:.1f} / {os.getloadavg()[0]:.1f}'}, res['code'])
     fastest = max((r['out_rate'] for r in rows if math.isfinite(r['out_rate'])),
                   default=math.nan)
     lines = [head, '## Headline', '', rate_headline(rows)]
@@ -554,7 +558,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             rest = rest[1:]
         return child_main(argv[1], rest)
     args = parse_args(argv)
-    out = common.results_dir(args.out)
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix='mlofc_bench_ros_') as tmp:
         try:
@@ -563,9 +566,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             print(f'bench ros: error: {exc}', file=sys.stderr)
             return 1
     report = build_report(args, argv, res, time.monotonic() - t0)
-    plot(out / 'ros.png', res['rows'])
-    (out / 'ros.md').write_text(report)
-    print(report)
+    plot(common.results_dir('ros', args.out) / 'ros.png', res['rows'])
+    common.write_report('ros', args.out, report)
     return 0
 
 

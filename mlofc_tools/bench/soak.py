@@ -11,12 +11,13 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Soak test: many frames through one :class:`~mlofc_ros.pipeline.Pipeline`, memory watched.
+"""
+Soak test: many frames through one :class:`~mlofc_ros.pipeline.Pipeline`, memory watched.
 
 A rendered sequence (``--boxes`` boxes + background, ``--size``, ``--loop`` frames) is played in
 a loop with monotonic stamps (1/30 s apart, so every loop is a jump in the image the tracker
 has to restart from, not a stamp reset). Resident memory (``VmRSS`` of ``/proc/self/status``)
-is sampled at the start, every ``--every`` frames and at the end; the report (``soak.md``) is
+is sampled at the start, every ``--every`` frames and at the end; the report (``README.md``) is
 rewritten at every sample, so an interrupted run still leaves its numbers. Memory is flat when
 the end RSS minus the RSS after the first block (allocator and caches warmed up) is small.
 
@@ -36,7 +37,8 @@ from mlofc_tools.bench import common
 
 
 def rss_mb(field: str = 'VmRSS') -> float:
-    """Resident memory of this process from ``/proc/self/status`` (MB = 2**20 bytes).
+    """
+    Resident memory of this process from ``/proc/self/status`` (MB = 2**20 bytes).
 
     ``field`` is ``VmRSS`` (now) or ``VmHWM`` (peak). NaN where ``/proc`` is missing.
     """
@@ -61,7 +63,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--seed', type=int, default=0)
     ap.add_argument('--quick', action='store_true',
                     help='smoke run: 20 frames of 320x240, sample every 10')
-    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results/soak)')
     args = ap.parse_args(list(argv))
     if args.quick:
         args.frames, args.every, args.size, args.loop = 20, 10, '320x240', 12
@@ -82,8 +84,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], samples: List[Di
                   f'{args.loop} rendered frames looped (stamps monotonic, 1/30 s apart)',
          'Pipeline': f'`Pipeline(num_bodies={args.boxes + 1})`, other parameters default; '
                      'single thread (cv2.setNumThreads(1), one BLAS thread)',
-         'Code (at start)': args.code,
-         'Load average (1 min) at start / now': f'{args.load:.1f} / {os.getloadavg()[0]:.1f}'})
+         'Load average (1 min) at start / now': f'{args.load:.1f} / {os.getloadavg()[0]:.1f}'},
+        args.code)
     first, last = samples[0], samples[-1]
     warm = samples[1] if len(samples) > 1 else first
     rate = last['frames'] / wall if wall > 0 else math.nan
@@ -120,14 +122,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     argv = list(argv or [])
     args = parse_args(argv)
     args.load = os.getloadavg()[0]
-    from mlofc_tools.bench.pipeline import code_revisions
-    args.code = code_revisions()
+    args.code = common.commit()        # before the run imports the code
     import cv2
     cv2.setNumThreads(1)
     from mlofc_ros.pipeline import Pipeline
     from mlofc_tools.render import render_sequence
 
-    out = common.results_dir(args.out)
+    out = common.results_dir('soak', args.out)
     common.eprint(f'soak: rendering {args.loop} frames {args.wh[0]}x{args.wh[1]}')
     seq = render_sequence(args.boxes, args.loop, size=args.wh, motion='camera_centre',
                           background=True, noise_sigma=2.0, seed=args.seed)
@@ -140,7 +141,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     block_solved: List[bool] = []
     block_tracks: List[int] = []
     block_problems = 0
-    path = out / 'soak.md'
+    path = out / common.REPORT_NAME
     t0 = time.monotonic()
     for i in range(args.frames):
         r = pipe.process(frames[i % len(frames)], i / 30.0, seq.camera)

@@ -11,13 +11,15 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Spinning boxes through the whole pipeline: rotation-only ('robust') vs 'general'.
+"""
+Spinning boxes through the whole pipeline: rotation-only ('robust') vs 'general'.
 
-Run ``python -m mlofc_tools.bench spinning``; writes ``docs/results/spinning.md`` and
-``spinning.png``. Rendered boxes spinning about their own centres (``own_centre``, so every
-box also translates relative to the camera) and, as a control, boxes rotating about the camera
-centre, go frame by frame through :class:`~mlofc_ros.pipeline.Pipeline`, exactly what the node
-runs (minus DDS). Scored on the frames with a full window, like ``python -m mlofc_tools.demo``:
+Run ``python -m mlofc_tools.bench spinning``; writes ``README.md`` and ``spinning.png`` to
+``docs/results/spinning/``. Rendered boxes spinning about their own centres (``own_centre``, so
+every box also translates relative to the camera) and, as a control, boxes rotating about the
+camera centre, go frame by frame through :class:`~mlofc_ros.pipeline.Pipeline`, exactly what the
+node runs (minus DDS). Scored on the frames with a full window, like
+``python -m mlofc_tools.demo``:
 
 - segments are matched to true edges (both endpoints within 3 px), the pipeline's stable body
   ids to true bodies by label overlap over the whole run;
@@ -62,7 +64,8 @@ SCENES = {
 
 def run_pipeline(seq, method: str, window: int, params: Optional[Dict[str, object]] = None
                  ) -> List[Tuple[object, float]]:
-    """``(FrameResult, CPU ms)`` of every frame of ``seq`` through a fresh pipeline.
+    """
+    ``(FrameResult, CPU ms)`` of every frame of ``seq`` through a fresh pipeline.
 
     ``params``: other :class:`Pipeline` parameters (node names) on top of the defaults.
     """
@@ -86,7 +89,8 @@ def _mapped(lab: np.ndarray, mapping: Dict[int, int], n_lab: int) -> np.ndarray:
 
 
 def score_run(seq, outs: Sequence[Tuple[object, float]], first: int) -> Dict[str, object]:
-    """Scores of a run (frames ``>= first``), see the module docstring.
+    """
+    Scores of a run (frames ``>= first``), see the module docstring.
 
     Returns ``wrong``, ``unassigned``, ``wrong_frame`` (fractions of ``matched``),
     ``omega_err`` (per true body, relative; NaN for static bodies), ``los_err`` (per body),
@@ -160,7 +164,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--frames', type=int, default=30, help='frames per sequence (30 Hz)')
     p.add_argument('--seeds', default='0,1,2', help='comma-separated render seeds')
     common.add_param_option(p, 'num_bodies, window and method are')
-    p.add_argument('--out', default=None, help='output folder (default docs/results)')
+    p.add_argument('--out', default=None, help='output folder (default docs/results/spinning)')
     args = p.parse_args(list(argv))
     args.params = common.parse_param_option(p, args)
     return args
@@ -191,7 +195,8 @@ def build_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
 
 
 def summary_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
-    """One row per (scene, method, window) over its seeds: means and the omega errors.
+    """
+    One row per (scene, method, window) over its seeds: means and the omega errors.
 
     Single runs are chaotic (a body that one frame fits in the wrong basin keeps it through
     the warm starts), so the goals are read on these rows.
@@ -257,19 +262,17 @@ def plot(path, records: Sequence[Dict[str, object]]) -> None:
 def build_report(args: argparse.Namespace, argv: Sequence[str],
                  records: Sequence[Dict[str, object]], seconds: float,
                  revision: Optional[str] = None) -> str:
-    """Markdown report; ``revision``: the package's at the start of the runs."""
-    rev = revision if revision is not None else common.git_revision('mlofc_ros')
+    """Return the Markdown report; ``revision``: the commit at the start of the runs."""
     head = common.run_header(
         'Spinning boxes through the pipeline: robust vs general',
         common.command_line('spinning', argv),
-        {'Code revision (mlofc_ros, at the start)': rev,
-         'Sequences': f'{args.frames} frames 640x480 at 30 Hz, 60-150 deg/s per box, '
+        {'Sequences': f'{args.frames} frames 640x480 at 30 Hz, 60-150 deg/s per box, '
                       'sensor noise 2 grey levels (mlofc_tools.render)',
-         'Run time': f'{seconds:.0f} s'})
+         'Run time': f'{seconds:.0f} s'}, revision)
     parts = [head, '', '## Over the seeds', '',
              common.markdown_table(SUMMARY_HEADERS, summary_rows(records)), '',
              '## Every run', '', common.markdown_table(HEADERS, build_rows(records)), '',
-             __doc__.split('\n\n', 1)[1].strip(), '']
+             __doc__.split('\n\n', 1)[1].strip(), '', '![spinning](spinning.png)', '']
     return '\n'.join(parts)
 
 
@@ -287,9 +290,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     windows = [int(w) for w in args.windows.split(',') if w]
     seeds = [int(s) for s in args.seeds.split(',') if s]
     t0 = time.monotonic()
-    # the whole package, before the runs import it: a table that names a clean revision
-    # must come from that code (session 19 found two that did not)
-    revision = common.git_revision('mlofc_ros')
+    # before the runs import the code: the report names the commit that ran, not a later one
+    revision = common.commit()
     records = []
     for scene in scenes:
         motion, boxes, background = SCENES[scene]
@@ -304,12 +306,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                     'window': window, 'score': score})
                     row = build_rows(records[-1:])[0]
                     common.eprint(' '.join(common.format_number(c) for c in row))
-    out = common.results_dir(args.out)
-    plot(out / 'spinning.png', records)
-    text = build_report(args, argv, records, time.monotonic() - t0, revision)
-    (out / 'spinning.md').write_text(text + '\n![spinning](spinning.png)\n')
-    print(common.markdown_table(HEADERS, build_rows(records)))
-    common.eprint(f'wrote {out / "spinning.md"} and {out / "spinning.png"}')
+    plot(common.results_dir('spinning', args.out) / 'spinning.png', records)
+    common.write_report('spinning', args.out,
+                        build_report(args, argv, records, time.monotonic() - t0, revision))
     return 0
 
 

@@ -11,10 +11,11 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Speed against tracking quality over the front end's settings: which goal costs which.
+"""
+Speed against tracking quality over the front end's settings: which goal costs which.
 
-Run ``python -m mlofc_tools.bench tradeoff``; writes ``docs/results/tradeoff.md`` and
-``tradeoff.png``. For every combination of the node parameters ``detector_scale``,
+Run ``python -m mlofc_tools.bench tradeoff``; writes ``README.md`` and ``tradeoff.png`` to
+``docs/results/tradeoff/``. For every combination of the node parameters ``detector_scale``,
 ``detect_every``, ``bridge_crossings`` and ``detect_every_max`` (``fixed`` = ``detect_every``, a
 fixed rate; a larger value is detection on demand; the rest at their defaults):
 
@@ -46,6 +47,7 @@ import numpy as np
 
 from mlofc_tools.bench import common, frontend
 from mlofc_tools.bench.frontend import SWITCH_GOAL_PCT, TRACKED_GOAL
+from mlofc_tools.scoring import score_tracks
 
 #: Issue #7's speed goal: ``Pipeline.process`` / LSD alone, here on the means.
 SPEED_GOAL = 0.5
@@ -68,12 +70,13 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--timing-frames', type=int, default=60,
                     help='frames of the timed sequence (the first `window` are not counted)')
     ap.add_argument('--jobs', type=int, default=1, help='settings run in this many processes')
-    ap.add_argument('--out', default=None, help='output folder (default docs/results)')
+    ap.add_argument('--out', default=None, help='output folder (default docs/results/tradeoff)')
     return ap.parse_args(list(argv))
 
 
 def settings(args: argparse.Namespace) -> List[Setting]:
-    """Every combination of the ``--scales``, ``--every``, ``--bridge`` and ``--max`` values.
+    """
+    Every combination of the ``--scales``, ``--every``, ``--bridge`` and ``--max`` values.
 
     An on-demand maximum not above ``detect_every`` is the fixed rate, listed once.
     """
@@ -103,7 +106,8 @@ def setting_text(setting: Setting) -> str:
 
 @functools.lru_cache(maxsize=2)
 def _sequences(frames: int, seeds: Tuple[int, ...], timing_frames: int) -> Tuple[object, list]:
-    """Render the timed sequence and the tracking sequences, once per process.
+    """
+    Render the timed sequence and the tracking sequences, once per process.
 
     Every setting runs on the same frames; rendering them is about a quarter of a setting's
     time, so a worker keeps them.
@@ -134,7 +138,7 @@ def run_setting(item: Tuple[Setting, int, Sequence[int], int]) -> Dict[str, obje
     for _label, rendered in tracking:
         out = frontend.run_tracker(lambda: make_tracker(params), rendered.frames,
                                    reference=False)
-        scores.append(frontend.score_tracks(out['ids'], out['segs'], rendered.truth))
+        scores.append(score_tracks(out['ids'], out['segs'], rendered.truth))
     return {'setting': setting, 'mean_ratio': float(cpu.mean() / lsd.mean()),
             'median_ratio': float(np.median(cpu) / np.median(lsd)),
             'mean_ms': float(cpu.mean()), 'median_ms': float(np.median(cpu)),
@@ -215,7 +219,6 @@ def build_report(argv: Sequence[str], records: Sequence[Dict[str, object]],
         'Speed vs tracking quality over the front-end settings',
         common.command_line('tradeoff', argv),
         {'Threads': 'single (`cv2.setNumThreads(1)`, one BLAS thread); CPU time per thread',
-         'Code': common.git_revision('mlofc_ros'),
          'Wall time': f'{seconds:.0f} s'})
     fast = [r for r in records if r['mean_ratio'] <= SPEED_GOAL]
     good = [r for r in records if frontend.meets_goal(r)]
@@ -255,12 +258,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     t0 = time.monotonic()
     records = common.run_parallel(run_setting, items, args.jobs, what='settings',
                                   reports=len(items))
-    out = common.results_dir(args.out)
-    plot(out / 'tradeoff.png', records)
-    text = build_report(argv, records, time.monotonic() - t0)
-    (out / 'tradeoff.md').write_text(text)
-    print(text)
-    common.eprint(f'wrote {out / "tradeoff.md"} and {out / "tradeoff.png"}')
+    plot(common.results_dir('tradeoff', args.out) / 'tradeoff.png', records)
+    common.write_report('tradeoff', args.out, build_report(argv, records, time.monotonic() - t0))
     return 0
 
 

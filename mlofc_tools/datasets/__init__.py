@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Datasets for benchmarks: real line tracks built from public point-track benchmarks.
+"""
+Datasets for benchmarks: real line tracks built from public point-track benchmarks.
 
 - :mod:`mlofc_tools.datasets.hopkins`: Hopkins155 motion-segmentation point tracks, paired into
   line tracks (two points of one rigid body span a 3D line of that body).

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Hopkins155 point tracks as real line tracks (no images: tracks and labels only).
+"""
+Hopkins155 point tracks as real line tracks (no images: tracks and labels only).
 
 Hopkins155 (R. Tron and R. Vidal, CVPR 2007) tracks feature points through short videos of 2 or
 3 independent motions and labels every point with its motion. The files used here are the
@@ -64,7 +65,8 @@ def parent_name(name: str) -> str:
 
 
 def sequence_group(name: str) -> str:
-    """Benchmark group of a sequence name: checkerboard, traffic, articulated or extra.
+    """
+    Benchmark group of a sequence name: checkerboard, traffic, articulated or extra.
 
     Checkerboard: names starting with a digit and ``three-cars``; traffic: ``cars*``,
     ``truck*``, ``kanatani1/2``; articulated/non-rigid: ``arm``, ``articulated``, ``people1/2``,
@@ -90,7 +92,8 @@ def sequence_group(name: str) -> str:
 
 @dataclass(frozen=True)
 class HopkinsSequence:
-    """One Hopkins155 sequence.
+    """
+    One Hopkins155 sequence.
 
     Attributes
     ----------
@@ -138,7 +141,8 @@ class HopkinsSequence:
 
 
 def load_sequence(path: PathLike) -> HopkinsSequence:
-    """Load one ``<sequence>.npz`` file.
+    """
+    Load one ``<sequence>.npz`` file.
 
     Raises
     ------
@@ -168,7 +172,8 @@ def load_sequence(path: PathLike) -> HopkinsSequence:
 
 def list_sequences(data_dir: Optional[PathLike] = None, include_extra: bool = False
                    ) -> List[pathlib.Path]:
-    """Sorted ``.npz`` files of the benchmark (155; plus ``dancing`` if ``include_extra``).
+    """
+    Sorted ``.npz`` files of the benchmark (155; plus ``dancing`` if ``include_extra``).
 
     Raises
     ------
@@ -196,7 +201,8 @@ def _occurrence_rank(ends: np.ndarray) -> np.ndarray:
 
 def _capped_selection(pairs: np.ndarray, n_points: int, max_uses: int, limit: int
                       ) -> np.ndarray:
-    """Select the first ``limit`` pairs of ``pairs (M, 2)``, in priority order.
+    """
+    Select the first ``limit`` pairs of ``pairs (M, 2)``, in priority order.
 
     No point is used more than ``max_uses`` times.
 
@@ -227,7 +233,8 @@ def _capped_selection(pairs: np.ndarray, n_points: int, max_uses: int, limit: in
 def pair_points(seq: HopkinsSequence, n_lines_per_motion: int = 30, start: int = 0,
                 min_length_px: float = 40.0, seed: int = 0, strategy: str = 'random',
                 max_uses: int = 2) -> Tuple[np.ndarray, np.ndarray]:
-    """Choose pairs of same-motion points that span the line tracks.
+    """
+    Choose pairs of same-motion points that span the line tracks.
 
     For every motion, the candidates are all pairs of its points at least ``min_length_px``
     apart in frame ``start``. They are put in a priority order, ``'random'`` (a random
@@ -290,7 +297,8 @@ def line_tracks(seq: HopkinsSequence, n_lines_per_motion: int = 30,
                 frames: Optional[Tuple[int, int]] = (0, 2), min_length_px: float = 40.0,
                 seed: int = 0, strategy: str = 'random', max_uses: int = 2
                 ) -> Tuple[np.ndarray, np.ndarray]:
-    """Line tracks over a window of the sequence, from pairs of same-motion points.
+    """
+    Line tracks over a window of the sequence, from pairs of same-motion points.
 
     The pairs come from :func:`pair_points` (minimum length checked in the window's first
     frame; every point in at most ``max_uses`` lines; at most ``n_lines_per_motion`` lines per

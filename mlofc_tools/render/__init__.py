@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Synthetic camera sequences of independently rotating striped boxes, with line ground truth.
+"""
+Synthetic camera sequences of independently rotating striped boxes, with line ground truth.
 
 :func:`render_sequence` returns a :class:`RenderedSequence` (frames, stamps, camera, angular
 velocities and per-frame :class:`FrameTruth` of the visible straight edges).

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Synthetic image sequences of rotating striped boxes, with per-frame line ground truth.
+"""
+Synthetic image sequences of rotating striped boxes, with per-frame line ground truth.
 
 Conventions: pixels ``(u, v)`` with pixel centres at integers; camera optical frame x right,
 y down, z forward; angular velocities right-handed in the camera frame, rad/s.  A body point
@@ -37,7 +38,8 @@ MOTIONS = ('camera_centre', 'own_centre')
 
 @dataclass
 class FrameTruth:
-    """Ground-truth line segments of one frame (``L`` visible 3D edges).
+    """
+    Ground-truth line segments of one frame (``L`` visible 3D edges).
 
     Attributes:
       segments: (L, 4) float64 ``(u1, v1, u2, v2)`` px, the longest visible part of each
@@ -58,7 +60,8 @@ class FrameTruth:
 
 @dataclass
 class RenderedSequence:
-    """A rendered sequence and its ground truth (``F`` frames, ``B`` bodies).
+    """
+    A rendered sequence and its ground truth (``F`` frames, ``B`` bodies).
 
     Attributes:
       frames: ``F`` gray images (H, W) uint8 (distorted when the camera has distortion).
@@ -165,7 +168,8 @@ def _project(points: np.ndarray, K: np.ndarray) -> np.ndarray:
 def _render_frame(bodies: List[Body], face_offset: np.ndarray, edge_offset: np.ndarray,
                   t: float, warp: _Warp) -> Tuple[np.ndarray, np.ndarray, np.ndarray,
                                                   np.ndarray, np.ndarray, np.ndarray]:
-    """Rasterise all bodies at time ``t`` seconds.
+    """
+    Rasterise all bodies at time ``t`` seconds.
 
     Returns ``(canvas (Hc, Wc) uint8, face ids (Hc, Wc) int32, p1 (N, 2), p2 (N, 2) px,
     faces (N, 2) global face ids, (body id, edge id) (N, 2))`` for the N candidate edges
@@ -234,7 +238,8 @@ def render_sequence(n_boxes: int = 2, n_frames: int = 20, size: Tuple[int, int] 
                     camera: CameraLike = None,
                     angular_speed_deg_s: Tuple[float, float] = (60.0, 150.0),
                     distortion: Optional[Sequence[float]] = None) -> RenderedSequence:
-    """Render ``n_frames`` gray frames of ``n_boxes`` rotating striped boxes, with ground truth.
+    """
+    Render ``n_frames`` gray frames of ``n_boxes`` rotating striped boxes, with ground truth.
 
     Args:
       n_boxes: 1..4 cuboids (depth 4..8 scene units, laid out so they stay apart in the image).

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Small geometry helpers of the synthetic renderer (rotations, clipping, plumb_bob distortion).
+"""
+Small geometry helpers of the synthetic renderer (rotations, clipping, plumb_bob distortion).
 
 Pixels are ``(u, v)`` (column, row, pixel centres at integers); the camera optical frame is
 x right, y down, z forward.
@@ -60,7 +61,8 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
 
 
 def clip_convex_polygon(poly: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
-    """Keep the part of a convex 2D polygon ``poly`` (N, 2) where ``normal . x <= offset``.
+    """
+    Keep the part of a convex 2D polygon ``poly`` (N, 2) where ``normal . x <= offset``.
 
     Sutherland-Hodgman against one half-plane; returns the clipped polygon (M, 2), M may be 0.
     """
@@ -86,7 +88,8 @@ def clip_convex_polygon(poly: np.ndarray, normal: np.ndarray, offset: float) -> 
 
 def clip_segments_to_rect(p1: np.ndarray, p2: np.ndarray, lo: Tuple[float, float],
                           hi: Tuple[float, float]) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Liang-Barsky clip of segments ``p1 -> p2`` (N, 2) to the box ``lo <= x <= hi``.
+    """
+    Liang-Barsky clip of segments ``p1 -> p2`` (N, 2) to the box ``lo <= x <= hi``.
 
     Returns ``(t0, t1, ok)``: parameters (N,) of the clipped part along ``p1 + t (p2 - p1)``
     and a mask (N,) of segments with a non-empty part inside.
@@ -110,7 +113,8 @@ def clip_segments_to_rect(p1: np.ndarray, p2: np.ndarray, lo: Tuple[float, float
 
 
 def distort_pixels(uv: np.ndarray, K: np.ndarray, d: Sequence[float]) -> np.ndarray:
-    """Map undistorted pinhole pixels ``uv`` (N, 2) through plumb_bob ``d = (k1, k2, p1, p2, k3)``.
+    """
+    Map undistorted pinhole pixels ``uv`` (N, 2) through plumb_bob ``d = (k1, k2, p1, p2, k3)``.
 
     Same model as OpenCV's ``projectPoints``; returns distorted pixels (N, 2).
     """

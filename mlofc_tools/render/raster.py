@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Sub-pixel accurate anti-aliased polygon filling with OpenCV.
+"""
+Sub-pixel accurate anti-aliased polygon filling with OpenCV.
 
 ``cv2.fillConvexPoly(..., cv2.LINE_AA, shift)`` draws every polygon dilated by ~0.6-0.75 px
 (depending on the edge direction).  :func:`offset_polygons` moves every polygon edge inward by
@@ -44,7 +45,8 @@ def aa_dilation(direction: np.ndarray) -> np.ndarray:
 
 def offset_polygons(uv: np.ndarray, nxt: np.ndarray, poly_start: np.ndarray,
                     expand: np.ndarray) -> np.ndarray:
-    """Move every edge of convex polygons inward by the AA dilation (or outward if ``expand``).
+    """
+    Move every edge of convex polygons inward by the AA dilation (or outward if ``expand``).
 
     ``uv``: (Nv, 2) vertices in pixels, polygons stored consecutively from ``poly_start``
     (Np + 1,); ``nxt``: (Nv,) next vertex of the same polygon; ``expand``: (Nv,) bool, edge

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Static description of the synthetic scene: striped cuboids and a striped background wall.
+"""
+Static description of the synthetic scene: striped cuboids and a striped background wall.
 
 Every body is a set of planar faces in its own body frame (units are arbitrary scene units,
 the camera sits at the origin of the camera optical frame: x right, y down, z forward).
@@ -27,7 +28,7 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from mlofc_tools.render.geometry import (clip_convex_polygon, random_rotation, so3_exp,
-                                       so3_exp_many)
+                                         so3_exp_many)
 
 #: Multipliers of a face's albedo: plain face, band of direction 1, direction 2, crossing.
 BOX_PATTERN = (1.0, 0.3, 0.6, 0.12)
@@ -38,7 +39,8 @@ BACKGROUND_PATTERN = (1.0, 2.0, 1.5, 2.8)
 
 @dataclass
 class Body:
-    """One rigid body: geometry in its body frame plus its motion.
+    """
+    One rigid body: geometry in its body frame plus its motion.
 
     Attributes (``Nv`` polygon vertices, ``Np`` polygons, ``Nf`` faces, ``Ne`` edges):
       name: ``'background'`` or ``'box<i>'``.
@@ -103,7 +105,8 @@ class _FaceBuilder:
                  normal: np.ndarray, half: Tuple[float, float], grey: float,
                  pattern: Sequence[float], bands: Sequence[Tuple[np.ndarray, List[float]]],
                  side_faces: Optional[Sequence[int]] = None) -> int:
-        """Add a rectangular face ``origin + s ax_s + t ax_t``, ``|s| <= half[0], |t| <= half[1]``.
+        """
+        Add a rectangular face ``origin + s ax_s + t ax_t``, ``|s| <= half[0], |t| <= half[1]``.
 
         ``bands``: per stripe direction a unit 2D normal ``n`` (in (s, t)) and sorted band
         boundaries ``[b0, b1, b2, b3, ...]`` (bands are ``b0 <= n.x <= b1`` etc.).
@@ -203,7 +206,8 @@ def _random_bands(rng: np.random.Generator, n2: np.ndarray, half: Tuple[float, f
 
 
 def make_box(rng: np.random.Generator, half: np.ndarray, name: str) -> Body:
-    """Cuboid with half extents ``half`` (3,), centred on its body origin, with striped faces.
+    """
+    Cuboid with half extents ``half`` (3,), centred on its body origin, with striped faces.
 
     The six faces get distinct albedos (so box edges have contrast) and 1 or 2 stripe
     directions each (3-4 bands for one direction, 2-3 bands per direction for two).
@@ -240,7 +244,8 @@ def make_box(rng: np.random.Generator, half: np.ndarray, name: str) -> Body:
 
 def make_background(rng: np.random.Generator, K: np.ndarray,
                     canvas: Tuple[int, int, int, int], depth: float = 12.0) -> Body:
-    """Build a static wall at ``depth`` (slightly tilted) covering the canvas, with band grid.
+    """
+    Build a static wall at ``depth`` (slightly tilted) covering the canvas, with band grid.
 
     ``canvas = (u0, v0, width, height)`` in image pixels (the region that is rasterised).
     """
@@ -301,7 +306,8 @@ def _cone_axis(rng: np.random.Generator, centre: np.ndarray, max_angle: float) -
 def place_boxes(rng: np.random.Generator, n_boxes: int, size: Tuple[int, int], K: np.ndarray,
                 motion: str, stamps: np.ndarray,
                 speed_range: Tuple[float, float]) -> List[Body]:
-    """Sample ``n_boxes`` striped boxes and motions that stay in view and apart for all stamps.
+    """
+    Sample ``n_boxes`` striped boxes and motions that stay in view and apart for all stamps.
 
     Boxes sit in a layout of image cells at depth 4..8; their bounding circles (projected
     bounding spheres) stay inside the image and overlap by at most ~10% of the radii sum in
@@ -360,7 +366,8 @@ def place_boxes(rng: np.random.Generator, n_boxes: int, size: Tuple[int, int], K
 
 def _layout_ok(plans: List[Tuple[np.ndarray, np.ndarray, np.ndarray, float]],
                stamps: np.ndarray, K: np.ndarray, size: Tuple[int, int]) -> bool:
-    """Check that every planned box stays in view and the boxes stay apart at every stamp.
+    """
+    Check that every planned box stays in view and the boxes stay apart at every stamp.
 
     ``plans``: per box ``(centre0 (3,), pivot (3,), omega (3,) rad/s, radius)``.
     """

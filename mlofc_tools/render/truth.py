@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Visible portions of projected 3D edges, from a face-id buffer.
+"""
+Visible portions of projected 3D edges, from a face-id buffer.
 
 An edge is sampled every :data:`STEP_PX` pixels along its projection (after clipping it to
 the rasterised canvas); a sample is visible when the face-id buffer, read
@@ -41,7 +42,8 @@ def visible_segments(p1: np.ndarray, p2: np.ndarray, faces: np.ndarray, id_buffe
                      K: Optional[np.ndarray] = None,
                      dist: Optional[Sequence[float]] = None
                      ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Longest visible run of every projected edge.
+    """
+    Longest visible run of every projected edge.
 
     Args:
       p1, p2: (N, 2) float64 projected (undistorted pinhole) endpoints, px.
