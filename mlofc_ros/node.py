@@ -435,7 +435,7 @@ class MlofcNode(Node):
 
     def _publish(self, header: Any, gray: Any, r: FrameResult, debug: bool) -> None:
         self._seg_pub.publish(segments_msg(header, r.segments, r.track_ids, r.labels,
-                                           r.residuals))
+                                           r.residuals, r.rays))
         with self._pub_lock:
             if self._values['num_bodies'] == 0:
                 self._grow_twist_publishers(len(r.angular_velocities))
