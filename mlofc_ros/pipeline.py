@@ -536,10 +536,13 @@ class Pipeline:
         return self.solve(self.observe(gray, stamp_seconds, camera))
 
     def observe(self, gray: np.ndarray, stamp_seconds: float,
-                camera: CameraLike = None) -> Observation:
+                camera: CameraLike = None, dropped: int = 0) -> Observation:
         """Track the lines of one frame and add them to the window; do not solve.
 
-        Arguments and errors as :meth:`process`. The returned :class:`Observation` goes to
+        Arguments and errors as :meth:`process`. ``dropped`` is the number of frames the caller
+        received since the previous one and did not pass on (the node's full queue): their
+        time is not a gap in the stream, so they do not restart the window
+        (``max_frame_gap`` counts intervals beyond them). The returned :class:`Observation` goes to
         :meth:`solve`, which may run in another thread, one observation at a time, while this
         method runs on the next frames (the node does so: tracking keeps the camera's rate
         when the solver cannot). Observations must be solved in order; one may be dropped
@@ -549,7 +552,7 @@ class Pipeline:
         gray = self._check_image(gray)
         self._check_source('image')
         return self._observe(stamp_seconds, camera, (int(gray.shape[1]), int(gray.shape[0])),
-                             t0, gray=gray)
+                             t0, gray=gray, dropped=dropped)
 
     def observe_lines(self, track_ids: np.ndarray, segments: np.ndarray, stamp_seconds: float,
                       image_size: Tuple[int, int], camera: CameraLike = None) -> Observation:
@@ -604,8 +607,12 @@ class Pipeline:
 
     def _observe(self, stamp_seconds: float, camera: CameraLike, size: Tuple[int, int],
                  t0: float, gray: Optional[np.ndarray] = None,
-                 lines: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> Observation:
+                 lines: Optional[Tuple[np.ndarray, np.ndarray]] = None,
+                 dropped: int = 0) -> Observation:
         """Add a frame to the window: an image (``gray``) or the caller's ``lines``."""
+        dropped = int(dropped)
+        if dropped < 0:
+            raise ValueError(f'dropped must be >= 0, got {dropped}')
         stamp = float(stamp_seconds)
         if not math.isfinite(stamp):
             raise ValueError(f'stamp must be finite, got {stamp_seconds!r}')
@@ -639,14 +646,16 @@ class Pipeline:
                 # statistics.median: the same value as np.median, ~20x cheaper on a few numbers
                 nominal = (float(statistics.median(self._intervals)) if self._intervals
                            else math.nan)
-                if gap > 0 and math.isfinite(nominal) and dt > gap * nominal:
+                # the frames the caller dropped fill their share of dt: only the rest is a gap
+                if gap > 0 and math.isfinite(nominal) and dt > (gap + dropped) * nominal:
+                    beyond = f' beyond {dropped} dropped' if dropped else ''
                     problems.append(f'{dt:.3f} s since the last frame (> {gap:g} x '
-                                    f'{nominal:.3f} s); window restarted')
+                                    f'{nominal:.3f} s{beyond}); window restarted')
                     self._restart_tracks()
                     resets.add('tracks')
                     self._intervals.clear()
                 else:
-                    self._intervals.append(dt)
+                    self._intervals.append(dt / (1 + dropped))
         self._last_stamp = stamp
 
         intrinsics, undistort_cam = self._intrinsics(cam, size)
