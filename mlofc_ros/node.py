@@ -147,7 +147,7 @@ class MlofcNode(Node):
         self._wake = threading.Condition(self._lock)
         # (image, camera, camera size, frames the node dropped just before this one)
         self._queue: Deque[List[Any]] = deque()
-        self._unpassed = 0      # frames received but not given to the pipeline since the last
+        self._unpassed = 0      # frames received, not given to the pipeline since the last one
         self._pending: Dict[str, Any] = {}
         self._camera: Optional[CameraModel] = None
         self._camera_size: Optional[Tuple[int, int]] = None
