@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 export HOME ?= /tmp
 export MPLBACKEND ?= Agg
 
-.PHONY: setup demo test bench lint clean
+.PHONY: setup demo test test-noble bench lint clean
 
 $(STAMP): requirements-ros.txt requirements-dev.txt setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,23 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q test
 
+# The library (everything but the ROS shell) on the versions Jazzy users have from Ubuntu
+# 24.04: python3-numpy 1.26.4, python3-opencv 4.6.0, python3-matplotlib 3.6.3, python3-yaml
+# 6.0.1. No ROS here: the tests marked `ros` are left out.
+NOBLE_VENV ?= .venv-noble
+NOBLE_PY := $(NOBLE_VENV)/bin/python
+NOBLE_STAMP := $(NOBLE_VENV)/.installed
+NOBLE_PINS := numpy==1.26.4 opencv-python-headless==4.6.0.66 matplotlib==3.6.3 pyyaml==6.0.1
+
+$(NOBLE_STAMP): Makefile
+	$(PYTHON) -m venv $(NOBLE_VENV)
+	$(NOBLE_PY) -m pip install --quiet --upgrade pip
+	$(NOBLE_PY) -m pip install --quiet $(NOBLE_PINS) pytest pytest-timeout hypothesis
+	touch $(NOBLE_STAMP)
+
+test-noble: $(NOBLE_STAMP)
+	PYTHONPATH=$(CURDIR) $(NOBLE_PY) -m pytest -q -m 'not ros and not linter' test
+
 bench: $(STAMP)
 	$(PY) -m mlofc_tools.bench all
 
@@ -30,4 +47,4 @@ lint: $(STAMP)
 	$(PY) -m pytest -q -m linter test
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) $(NOBLE_VENV) build *.egg-info .pytest_cache

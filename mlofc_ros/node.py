@@ -27,7 +27,8 @@ published only for a body solved in that frame (finite angular velocity and cova
 least ``pipeline.MIN_BODY_TRACKS`` tracks: a twist is withheld rather than invented). Frames
 with an undecodable image or a duplicate stamp are skipped (no output, throttled warning); a
 processed frame without lines still gets its (empty) ``~/segments`` cloud. A stamp going back
-(bag loop) restarts tracks and window, a gap of ``max_frame_gap`` intervals the window. A bad
+(bag loop) restarts tracks and window, a gap of ``max_frame_gap`` intervals the window (the
+frames the node dropped itself are no gap: their count goes with the next frame). A bad
 camera_info (K zero or non-finite, wrong D length, unknown distortion model) is warned about
 once per change and ignored: ``focal_length`` is used, or the focal length estimated.
 
@@ -130,16 +131,23 @@ class MlofcNode(Node):
 
     def __init__(self, node_name: str = 'mlofc', **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
+        self.add_pre_set_parameters_callback(self._convert_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
         for spec in P.PARAMETERS:
             self.declare_parameter(spec.name, spec.default, parameter_descriptor(spec))
+        # an integer override of a double (-p focal_length:=500) is declared as given: store
+        # it converted, as a runtime set is (declaration skips the pre-set callbacks)
+        self.set_parameters([self.get_parameter(spec.name) for spec in P.PARAMETERS
+                             if spec.type is float
+                             and self.get_parameter(spec.name).type_ == Parameter.Type.INTEGER])
         values = {name: P.coerce(name, self.get_parameter(name).value) for name in P.PARAMS}
         self._values: Dict[str, Any] = values
 
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
-        self._queue: Deque[Tuple[Image, Optional[CameraModel], Optional[Tuple[int, int]]]] = \
-            deque()
+        # (image, camera, camera size, frames the node dropped just before this one)
+        self._queue: Deque[List[Any]] = deque()
+        self._unpassed = 0      # frames received, not given to the pipeline since the last one
         self._pending: Dict[str, Any] = {}
         self._camera: Optional[CameraModel] = None
         self._camera_size: Optional[Tuple[int, int]] = None
@@ -195,6 +203,19 @@ class MlofcNode(Node):
 
     # --- parameters ----------------------------------------------------------------------
 
+    def _convert_parameters(self, parameters: List[Parameter]) -> List[Parameter]:
+        """
+        Convert integers given for double parameters to doubles before they are stored.
+
+        Doubles are declared with dynamic typing so that ``-p focal_length:=500`` and ``ros2
+        param set /mlofc focal_length 500`` are accepted; without this they would be stored
+        (and read back) as integers.
+        """
+        return [Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+                if (p.name in P.PARAMS and P.PARAMS[p.name].type is float
+                    and p.type_ == Parameter.Type.INTEGER) else p
+                for p in parameters]
+
     def _validate_parameters(self, parameters: List[Parameter]) -> SetParametersResult:
         """Accept or reject a parameter change with a readable reason (nothing changes here)."""
         for p in parameters:
@@ -239,14 +260,17 @@ class MlofcNode(Node):
     def _trim_queue(self) -> None:
         """Drop the stalest frames beyond ``queue_size`` (call with the lock held)."""
         while len(self._queue) > self._values['queue_size']:
-            self._queue.popleft()
+            dropped = self._queue.popleft()
+            # the next frame carries the count: its stamp gap is the node's doing, not the
+            # camera's, and must not restart the window (Pipeline.observe's ``dropped``)
+            self._queue[0][3] += dropped[3] + 1
             self.stats['dropped'] += 1
 
     def _on_image(self, msg: Image) -> None:
         with self._lock:
             self.stats['received'] += 1
             self._frame_id = msg.header.frame_id
-            self._queue.append((msg, self._camera, self._camera_size))
+            self._queue.append([msg, self._camera, self._camera_size, 0])
             self._trim_queue()
             self._wake.notify()
 
@@ -355,10 +379,14 @@ class MlofcNode(Node):
             self.stats[key] += 1
 
     def _observe(self, msg: Image, camera: Optional[CameraModel],
-                 camera_size: Optional[Tuple[int, int]], debug: bool) -> None:
+                 camera_size: Optional[Tuple[int, int]], dropped: int, debug: bool) -> None:
+        # frames the node itself did not pass on since the last one: the queue's drops and
+        # undecodable images (tracking worker only)
+        self._unpassed += dropped
         try:
             gray = image_msg_to_gray(msg, max_pixels=self._values['max_pixels'])
         except ValueError as exc:
+            self._unpassed += 1
             self._count('skipped')
             self._warn('image', f'bad image on {self.resolve_topic_name("image")}: {exc}; '
                        'frame skipped')
@@ -369,8 +397,11 @@ class MlofcNode(Node):
                        f'images but the image is {size[0]}x{size[1]}; ignoring camera_info')
             camera = None
         try:
-            obs = self._pipeline.observe(gray, stamp_to_seconds(msg.header.stamp), camera)
+            obs = self._pipeline.observe(gray, stamp_to_seconds(msg.header.stamp), camera,
+                                         dropped=self._unpassed)
+            self._unpassed = 0
         except ValueError as exc:
+            self._unpassed += 1
             self._count('skipped')
             self._warn('input', f'{exc}; frame skipped')
             return
@@ -435,7 +466,7 @@ class MlofcNode(Node):
 
     def _publish(self, header: Any, gray: Any, r: FrameResult, debug: bool) -> None:
         self._seg_pub.publish(segments_msg(header, r.segments, r.track_ids, r.labels,
-                                           r.residuals))
+                                           r.residuals, r.rays))
         with self._pub_lock:
             if self._values['num_bodies'] == 0:
                 self._grow_twist_publishers(len(r.angular_velocities))

@@ -160,7 +160,8 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               range=(0.0, 1.0e6)),
     ParamSpec('max_frame_gap', float, 3.0,
               'Restart the window when consecutive stamps are further apart than this many '
-              'nominal frame intervals (median of recent intervals); 0 = never.',
+              'nominal frame intervals (median of recent intervals), beyond the frames the '
+              'node dropped itself (its full queue); 0 = never.',
               range=(0.0, 1000.0)),
     ParamSpec('seed', int, 0,
               'Random seed of the solver (results are reproducible for a given seed).',

@@ -132,6 +132,11 @@ class FrameResult:
         True when the frame was not processed at all (duplicate stamp): nothing to publish.
     carried : (M,) bool
         True where the label was carried over from an earlier window, not given by this solve.
+    rays : (M, 3) float32
+        Viewing ray through every segment's midpoint at unit depth ``(x, y, 1)``, camera optical
+        frame, from the undistorted segment and the intrinsics of this frame (the camera's, the
+        ``focal_length`` parameter, or the estimated focal length with the principal point at
+        the image centre); NaN while the focal length is not known.
     """
 
     stamp: float
@@ -150,6 +155,7 @@ class FrameResult:
     n_tracks: int = 0
     skipped: bool = False
     carried: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    rays: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.float32))
 
     @property
     def solved(self) -> bool:
@@ -196,6 +202,8 @@ class Observation:
         Milliseconds :meth:`Pipeline.observe` took.
     skipped : bool
         The frame was not processed (duplicate stamp): nothing to solve or publish.
+    undistorted : (M, 4) float64 or None
+        ``segments`` undistorted (None: the same as ``segments``, no distortion).
     """
 
     stamp: float
@@ -214,6 +222,7 @@ class Observation:
     resets: FrozenSet[str] = frozenset()
     elapsed_ms: float = 0.0
     skipped: bool = False
+    undistorted: Optional[np.ndarray] = None
 
     @classmethod
     def skip(cls, stamp: float, gray: Optional[np.ndarray], problem: str, fill: int
@@ -231,6 +240,25 @@ class Observation:
         """
         problems = list(dict.fromkeys(older.problems + self.problems))
         return dataclasses.replace(self, resets=self.resets | older.resets, problems=problems)
+
+
+def segment_rays(segments: np.ndarray,
+                 intrinsics: Optional[Tuple[float, float, float, float]]) -> np.ndarray:
+    """
+    Return the viewing ray ``(x, y, 1)`` through every segment's midpoint, ``(M, 3)`` float32.
+
+    ``segments`` are ``(M, 4)`` undistorted pixels, ``intrinsics`` ``(fx, fy, cx, cy)``; the
+    rays are NaN when ``intrinsics`` is None (the focal length is not known).
+    """
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    rays = np.full((len(seg), 3), np.nan, dtype=np.float32)
+    if intrinsics is None or not len(seg):
+        return rays
+    fx, fy, cx, cy = intrinsics
+    rays[:, 0] = (0.5 * (seg[:, 0] + seg[:, 2]) - cx) / fx
+    rays[:, 1] = (0.5 * (seg[:, 1] + seg[:, 3]) - cy) / fy
+    rays[:, 2] = 1.0
+    return rays
 
 
 def _invalid_bodies(n: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -492,10 +520,13 @@ class Pipeline:
         return self.solve(self.observe(gray, stamp_seconds, camera))
 
     def observe(self, gray: np.ndarray, stamp_seconds: float,
-                camera: CameraLike = None) -> Observation:
+                camera: CameraLike = None, dropped: int = 0) -> Observation:
         """Track the lines of one frame and add them to the window; do not solve.
 
-        Arguments and errors as :meth:`process`. The returned :class:`Observation` goes to
+        Arguments and errors as :meth:`process`. ``dropped`` is the number of frames the caller
+        received since the previous one and did not pass on (the node's full queue): their
+        time is not a gap in the stream, so they do not restart the window
+        (``max_frame_gap`` counts intervals beyond them). The returned :class:`Observation` goes to
         :meth:`solve`, which may run in another thread, one observation at a time, while this
         method runs on the next frames (the node does so: tracking keeps the camera's rate
         when the solver cannot). Observations must be solved in order; one may be dropped
@@ -505,7 +536,7 @@ class Pipeline:
         gray = self._check_image(gray)
         self._check_source('image')
         return self._observe(stamp_seconds, camera, (int(gray.shape[1]), int(gray.shape[0])),
-                             t0, gray=gray)
+                             t0, gray=gray, dropped=dropped)
 
     def observe_lines(self, track_ids: np.ndarray, segments: np.ndarray, stamp_seconds: float,
                       image_size: Tuple[int, int], camera: CameraLike = None) -> Observation:
@@ -560,8 +591,12 @@ class Pipeline:
 
     def _observe(self, stamp_seconds: float, camera: CameraLike, size: Tuple[int, int],
                  t0: float, gray: Optional[np.ndarray] = None,
-                 lines: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> Observation:
+                 lines: Optional[Tuple[np.ndarray, np.ndarray]] = None,
+                 dropped: int = 0) -> Observation:
         """Add a frame to the window: an image (``gray``) or the caller's ``lines``."""
+        dropped = int(dropped)
+        if dropped < 0:
+            raise ValueError(f'dropped must be >= 0, got {dropped}')
         stamp = float(stamp_seconds)
         if not math.isfinite(stamp):
             raise ValueError(f'stamp must be finite, got {stamp_seconds!r}')
@@ -595,14 +630,16 @@ class Pipeline:
                 # statistics.median: the same value as np.median, ~20x cheaper on a few numbers
                 nominal = (float(statistics.median(self._intervals)) if self._intervals
                            else math.nan)
-                if gap > 0 and math.isfinite(nominal) and dt > gap * nominal:
+                # the frames the caller dropped fill their share of dt: only the rest is a gap
+                if gap > 0 and math.isfinite(nominal) and dt > (gap + dropped) * nominal:
+                    beyond = f' beyond {dropped} dropped' if dropped else ''
                     problems.append(f'{dt:.3f} s since the last frame (> {gap:g} x '
-                                    f'{nominal:.3f} s); window restarted')
+                                    f'{nominal:.3f} s{beyond}); window restarted')
                     self._restart_tracks()
                     resets.add('tracks')
                     self._intervals.clear()
                 else:
-                    self._intervals.append(dt)
+                    self._intervals.append(dt / (1 + dropped))
         self._last_stamp = stamp
 
         intrinsics, undistort_cam = self._intrinsics(cam, size)
@@ -662,7 +699,8 @@ class Pipeline:
                            intrinsics=intrinsics, image_size=size, window_fill=fill,
                            frame_interval=interval, blank=blank, problems=problems,
                            timings=timings, resets=frozenset(resets),
-                           elapsed_ms=(time.perf_counter() - t0) * 1e3)
+                           elapsed_ms=(time.perf_counter() - t0) * 1e3,
+                           undistorted=corrected if corrected is not segments else None)
 
     def solve(self, obs: Observation) -> FrameResult:
         """Segment the window of ``obs`` (from :meth:`observe`) and return the frame's result.
@@ -788,10 +826,14 @@ class Pipeline:
                     self._focal_fixed = float(np.median(self._focal_samples))
         else:
             w_out, c_out, v_out = _invalid_bodies(self.n_bodies)
+        if intrinsics is None and math.isfinite(focal) and focal > 0:
+            intrinsics = (focal, focal, size[0] / 2.0, size[1] / 2.0)     # as the solver's
+        rays = segment_rays(segments if obs.undistorted is None else obs.undistorted,
+                            intrinsics)
         timings['total'] = obs.elapsed_ms + (time.perf_counter() - t0) * 1e3
         return FrameResult(
             stamp=stamp, segments=segments, track_ids=track_ids, labels=labels,
             residuals=residuals.astype(np.float32), angular_velocities=w_out,
             angular_covariances=c_out, body_valid=v_out, timings=timings, window_fill=fill,
             problem='; '.join(problems) or None, focal_length=focal, frame_interval=interval,
-            n_tracks=int(len(win_ids)), carried=carried)
+            n_tracks=int(len(win_ids)), carried=carried, rays=rays)

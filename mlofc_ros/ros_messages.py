@@ -14,8 +14,9 @@
 """Build and parse the ROS messages of mlofc_ros (needs the message packages, not rclpy).
 
 - ``~/segments``: ``sensor_msgs/PointCloud2``, one point per line segment of the newest frame,
-  with the layout of :data:`mlofc_ros.messages.segments.SEGMENT_FIELDS` (x1, y1, x2, y2 pixels as
-  seen in the image, track_id, label (-1 unassigned), residual), little-endian, ``height = 1``.
+  with the layout of :data:`mlofc_ros.messages.segments.SEGMENT_FIELDS` (x, y, z the viewing
+  ray through the segment's midpoint at unit depth, x1, y1, x2, y2 pixels as seen in the image,
+  track_id, label (-1 unassigned), residual), little-endian, ``height = 1``.
 - ``~/body_<i>/twist``: ``geometry_msgs/TwistWithCovarianceStamped``; ``angular`` is the body's
   angular velocity relative to the camera in rad/s, camera optical frame (x right, y down,
   z forward; ``header.frame_id`` is the image's frame). The rotation-only model does not measure
@@ -61,7 +62,8 @@ def segment_fields() -> list:
 
 
 def segments_msg(header: Header, segments: np.ndarray, track_ids: np.ndarray,
-                 labels: np.ndarray, residuals: np.ndarray) -> PointCloud2:
+                 labels: np.ndarray, residuals: np.ndarray,
+                 rays: Optional[np.ndarray] = None) -> PointCloud2:
     """Build the ``~/segments`` cloud: one point per segment, in the given order.
 
     Parameters
@@ -75,10 +77,13 @@ def segments_msg(header: Header, segments: np.ndarray, track_ids: np.ndarray,
         Stable body id of every segment, -1 unassigned.
     residuals : (M,) float
         Residual of every segment under its body in pixels (NaN when not solved).
+    rays : (M, 3) float or None
+        ``x y z``: the viewing ray through every segment's midpoint at unit depth
+        (:attr:`mlofc_ros.pipeline.FrameResult.rays`); None or NaN rows = not known.
 
-    The cloud is ``is_dense`` (every point is a valid segment; NaN residual = not solved).
+    The cloud is ``is_dense`` when every ray is known (NaN residual = not solved).
     """
-    f = segment_cloud_fields(segments, track_ids, labels, residuals)
+    f = segment_cloud_fields(segments, track_ids, labels, residuals, rays)
     msg = PointCloud2()
     msg.header = header
     msg.height = int(f['height'])
@@ -96,7 +101,20 @@ def parse_segments_msg(msg: PointCloud2) -> Tuple[np.ndarray, np.ndarray, np.nda
     """Parse a ``~/segments`` cloud into ``(segments (M,4), track_ids, labels, residuals)``.
 
     Raises ``ValueError`` when the field layout is not the one of ``SEGMENT_FIELDS``.
+    :func:`parse_segment_rays` reads the ``x y z`` rays.
     """
+    out = _unpack_segments_msg(msg)
+    segs = np.stack([out[k] for k in ('x1', 'y1', 'x2', 'y2')], axis=-1)
+    return segs, out['track_id'], out['label'], out['residual']
+
+
+def parse_segment_rays(msg: PointCloud2) -> np.ndarray:
+    """Return the ``(M, 3)`` float32 ``x y z`` rays of a ``~/segments`` cloud (NaN = unknown)."""
+    out = _unpack_segments_msg(msg)
+    return np.stack([out[k] for k in ('x', 'y', 'z')], axis=-1)
+
+
+def _unpack_segments_msg(msg: PointCloud2) -> np.ndarray:
     got = [(f.name, f.offset, f.datatype, f.count) for f in msg.fields]
     want = [(n, int(o), int(d), int(c)) for n, o, d, c in SEGMENT_FIELDS]
     if got != want:
@@ -105,9 +123,7 @@ def parse_segments_msg(msg: PointCloud2) -> Tuple[np.ndarray, np.ndarray, np.nda
         raise ValueError('~/segments cloud is big-endian; expected little-endian')
     if msg.point_step != POINT_STEP:
         raise ValueError(f'~/segments point_step is {msg.point_step}, expected {POINT_STEP}')
-    out = unpack_segments(msg.data)
-    segs = np.stack([out[k] for k in ('x1', 'y1', 'x2', 'y2')], axis=-1)
-    return segs, out['track_id'], out['label'], out['residual']
+    return unpack_segments(msg.data)
 
 
 def twist_msg(header: Header, angular_velocity: np.ndarray,

@@ -17,7 +17,7 @@
 1. Render boxes rotating about the camera centre in front of a static striped wall (2 boxes +
    background = 3 bodies, 640x480, 60 frames at 30 Hz, known angular velocities and edges).
 2. Write them as a rosbag2 (mcap) with ``sensor_msgs/Image`` mono8 and ``CameraInfo``.
-3. Start ``mlofc_node`` as a separate process on a fresh ``ROS_DOMAIN_ID``, play the bag into it
+3. Start ``mlofc_node`` as a separate process on the run's ``ROS_DOMAIN_ID``, play the bag into it
    over DDS with :mod:`mlofc_ros.bag.player` (lock-step: the next frame goes out when the node
    has answered the previous one, so no frame is dropped however slow the machine), and collect
    ``/mlofc/segments`` and ``/mlofc/body_<i>/twist``.
@@ -269,7 +269,7 @@ def write_report(out: Optional[str], lines: Sequence[str], cfg: DemoConfig,
         'Bag': f'rosbag2 mcap, `{IMAGE_TOPIC}` (mono8) + `{INFO_TOPIC}`, played by '
                '`mlofc_ros.bag.player` in lock-step (each frame is sent when the node has '
                'answered the previous one)',
-        'Node': f'separate process, `{node_cmd}`, fresh `ROS_DOMAIN_ID`',
+        'Node': f'separate process, `{node_cmd}`, its own `ROS_DOMAIN_ID`',
         'Scoring': f'a detection is on a true edge when both endpoints are within '
                    f'{MATCH_TOLERANCE_PX:g} px of it; node body ids are matched to true bodies '
                    'by label overlap; omega is the median over the scored frames of '
@@ -312,7 +312,7 @@ def _parser() -> argparse.ArgumentParser:
                    help='seconds to wait for the node to answer a frame (default 30)')
     p.add_argument('--startup-timeout', type=float, default=60.0,
                    help='seconds to wait for the node to subscribe (default 60)')
-    p.add_argument('--domain-id', type=int, help='ROS domain id (default: a random fresh one)')
+    p.add_argument('--domain-id', type=int, help='ROS domain id (default: ROS_DOMAIN_ID, else a random one)')
     return p
 
 

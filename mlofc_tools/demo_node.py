@@ -93,9 +93,22 @@ class Collected:
 
 
 def node_command() -> List[str]:
-    """Command that starts the installed ``mlofc_node`` (console script, colcon or PATH)."""
-    candidates = [Path(sys.executable).parent / 'mlofc_node',
-                  Path(sys.prefix) / 'lib' / 'mlofc_ros' / 'mlofc_node']
+    """
+    Return the command that starts ``mlofc_node``, found as ``ros2 run`` finds it.
+
+    ``lib/mlofc_ros/mlofc_node`` under the package's prefix in the ament index (a colcon
+    workspace), then the console script beside this Python (a pip install), then ``PATH``.
+    """
+    candidates = [Path(sys.executable).parent / 'mlofc_node']
+    try:
+        from ament_index_python.packages import get_package_prefix, PackageNotFoundError
+        try:
+            candidates.insert(0, Path(get_package_prefix('mlofc_ros')) / 'lib' / 'mlofc_ros'
+                              / 'mlofc_node')
+        except (PackageNotFoundError, OSError):   # not in the index
+            pass
+    except ImportError:                            # no ROS on this Python
+        pass
     for cand in candidates:
         if cand.is_file() and os.access(cand, os.X_OK):
             return [str(cand)]
@@ -107,13 +120,11 @@ def node_command() -> List[str]:
 
 
 def fresh_domain_id() -> int:
-    """Pick a random ROS domain id in 1..100, different from the current one."""
-    current = os.environ.get('ROS_DOMAIN_ID')
-    rng = random.SystemRandom()
-    while True:
-        d = rng.randint(1, 100)
-        if str(d) != current:
-            return d
+    """Return the ROS_DOMAIN_ID set in the environment, else a random one in 1..100."""
+    current = os.environ.get('ROS_DOMAIN_ID', '').strip()
+    if current.isdigit():
+        return int(current)
+    return random.SystemRandom().randint(1, 100)
 
 
 class NodeProcess:

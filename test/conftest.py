@@ -13,7 +13,9 @@
 # limitations under the License.
 
 """Test-wide setup: every test run gets its own ROS domain and a HOME for rcl logging."""
+import importlib.util
 import os
+from pathlib import Path
 import random
 
 import pytest
@@ -25,6 +27,20 @@ for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
 if 'ROS_DOMAIN_ID' not in os.environ:
     # 1..100 stays inside the default DDS port range; random so parallel runs do not meet
     os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 100))
+
+#: Modules whose every test is marked ``ros`` and which import ROS (rclpy, message packages,
+#: rosbags) at the top: a run that deselects ``ros`` where ROS is not installed (``make
+#: test-noble``) leaves them out instead of failing to import them.
+ROS_ONLY_MODULES = ('test_bag.py', 'test_node.py', 'test_node_robustness.py')
+
+
+def pytest_ignore_collect(collection_path: Path, config: pytest.Config):
+    """Leave out :data:`ROS_ONLY_MODULES` in a ``-m 'not ros'`` run without rclpy."""
+    if (collection_path.name in ROS_ONLY_MODULES
+            and 'not ros' in (config.getoption('markexpr') or '')
+            and importlib.util.find_spec('rclpy') is None):
+        return True
+    return None
 
 
 @pytest.fixture(scope='module')

@@ -12,10 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Shared DDS test harness: a test node and an executor spinning in a thread (real rclpy)."""
+import os
+from pathlib import Path
+import sys
 import threading
 import time
 from typing import Callable, Dict, List
 
+from ament_index_python.packages import get_package_prefix, PackageNotFoundError
 import numpy as np
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import GetParameters, SetParameters
@@ -29,6 +33,29 @@ from mlofc_ros.image.decode import gray_to_image_fields
 from mlofc_ros.ros_messages import stamp_to_seconds
 
 FRAME_ID = 'camera_optical_frame'
+PACKAGE = 'mlofc_ros'
+
+
+def executable(name: str) -> str:
+    """
+    Return the path of the package's executable ``name``, found as ``ros2 run`` finds it.
+
+    First ``lib/mlofc_ros/<name>`` under the package's prefix in the ament index (a colcon
+    workspace, or any install with the index marker on ``AMENT_PREFIX_PATH``), then the
+    ``bin/`` of the Python running the tests (a pip install). Fails, never skips, when neither
+    holds it: every test that starts the node or a bag tool goes through here.
+    """
+    candidates = []
+    try:
+        candidates.append(Path(get_package_prefix(PACKAGE)) / 'lib' / PACKAGE / name)
+    except (PackageNotFoundError, OSError):   # not in the index, or AMENT_PREFIX_PATH unset
+        pass
+    candidates.append(Path(sys.executable).parent / name)
+    for path in candidates:
+        if path.is_file() and os.access(path, os.X_OK):
+            return str(path)
+    raise AssertionError(f'{name} not found in ' + ', '.join(map(str, candidates)) +
+                         ': build with colcon and source the workspace, or pip install -e .')
 
 
 def stamp(msg, t: float):

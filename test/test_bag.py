@@ -23,6 +23,7 @@ import threading
 import time
 from types import SimpleNamespace
 
+from dds import executable
 import numpy as np
 import pytest
 
@@ -31,20 +32,15 @@ from mlofc_ros.bag.bagfile import CAMERA_INFO_TYPE, deserialize, IMAGE_TYPE, mes
 from mlofc_ros.bag.offline import main as bag_main, parse_param
 from mlofc_ros.camera import CameraModel
 
-BIN = Path(sys.executable).parent
+# the bag tools are the ROS shell (rosbags, message classes): not for a run without ROS
+pytestmark = pytest.mark.ros
+
 CAMERA = CameraModel(60.0, 61.0, 31.5, 23.5, (0.01, -0.002, 0.0, 0.0, 0.0), 'plumb_bob')
 
 
 def _frames(n, shape=(48, 64)):
     rng = np.random.default_rng(1)
     return [rng.integers(0, 256, shape, dtype=np.uint8) for _ in range(n)]
-
-
-def _script(name):
-    path = BIN / name
-    if not path.exists():
-        pytest.skip(f'{name} not installed next to {sys.executable} (pip install -e .)')
-    return str(path)
 
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
@@ -147,7 +143,7 @@ def test_mlofc_bag_end_to_end(tmp_path):
     seq = render_sequence(n_boxes=1, n_frames=8, size=(320, 240), seed=3)
     write_image_bag(tmp_path / 'in', seq.frames, seq.stamps, seq.camera, storage='sqlite3')
     proc = subprocess.run(
-        [_script('mlofc_bag'), str(tmp_path / 'in'), str(tmp_path / 'out'),
+        [executable('mlofc_bag'), str(tmp_path / 'in'), str(tmp_path / 'out'),
          '-p', 'num_bodies:=2', '--debug-image'],
         capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
@@ -200,7 +196,7 @@ def test_player_delivers_every_message(tmp_path):
     spinner.start()
     try:
         proc = subprocess.run(
-            [_script('mlofc_play'), str(tmp_path / 'bag'), '--rate', '2',
+            [executable('mlofc_play'), str(tmp_path / 'bag'), '--rate', '2',
              '--remap', '/camera/image_raw:=/cam/image', '--wait-for-subscribers', '20',
              '--reliable'],
             capture_output=True, text=True, timeout=60)
@@ -472,7 +468,7 @@ def test_interrupted_mlofc_bag_keeps_a_finished_bag(tmp_path):
     from mlofc_ros.render import render_sequence
     seq = render_sequence(n_boxes=1, n_frames=200, size=(320, 240), seed=3)
     write_image_bag(tmp_path / 'in', seq.frames, seq.stamps, seq.camera)
-    proc = subprocess.Popen([_script('mlofc_bag'), str(tmp_path / 'in'), str(tmp_path / 'out')],
+    proc = subprocess.Popen([executable('mlofc_bag'), str(tmp_path / 'in'), str(tmp_path / 'out')],
                             stderr=subprocess.PIPE, text=True)
     try:
         first = proc.stderr.readline()          # the bar's first 10 % line (not a tty)
@@ -502,7 +498,7 @@ def test_mlofc_play_stops_cleanly_on_ctrl_c(tmp_path):
     rng = np.random.default_rng(7)
     for _ in range(4):
         # --rate 0 --loop: publishing all the time, so the signal lands inside a publish
-        proc = subprocess.Popen([_script('mlofc_play'), str(tmp_path / 'bag'), '--rate', '0',
+        proc = subprocess.Popen([executable('mlofc_play'), str(tmp_path / 'bag'), '--rate', '0',
                                  '--loop'], stderr=subprocess.PIPE, text=True)
         try:
             started = proc.stderr.readline()

@@ -81,6 +81,7 @@ def test_soak_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert soak.rss_mb() > 1.0
 
 
+@pytest.mark.ros
 def test_ros_quick_writes_report(tmp_path: pathlib.Path) -> None:
     pytest.importorskip('rclpy')
     from mlofc_tools.bench import ros
@@ -106,6 +107,7 @@ def test_ros_process_times_are_read_back_by_frame_range(tmp_path: pathlib.Path) 
     assert np.isnan(cpu[0]) and cpu[1] == 2.5
 
 
+@pytest.mark.ros
 def test_live_quick_writes_report(tmp_path: pathlib.Path) -> None:
     pytest.importorskip('rclpy')
     from mlofc_tools.bench import live

@@ -224,6 +224,7 @@ def test_data_containers_and_msg(kind):
     np.testing.assert_array_equal(image_msg_to_gray(msg), GRAY)
 
 
+@pytest.mark.ros
 def test_real_sensor_msgs_image():
     msg_mod = pytest.importorskip('sensor_msgs.msg')
     f = raw_fields(RNG.integers(0, 65536, (H, W), dtype=np.uint16), 'mono16', True, 2)

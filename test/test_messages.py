@@ -42,11 +42,13 @@ def random_segments(m):
 
 
 def test_layout_is_the_documented_one():
-    assert [f[0] for f in SEGMENT_FIELDS] == ['x1', 'y1', 'x2', 'y2', 'track_id', 'label',
-                                              'residual']
-    assert [f[2] for f in SEGMENT_FIELDS] == [7, 7, 7, 7, 6, 5, 7]
+    # x y z first: what RViz and Foxglove take for a point's position
+    assert [f[0] for f in SEGMENT_FIELDS] == ['x', 'y', 'z', 'x1', 'y1', 'x2', 'y2', 'track_id',
+                                              'label', 'residual']
+    assert [f[2] for f in SEGMENT_FIELDS] == [7, 7, 7, 7, 7, 7, 7, 6, 5, 7]
+    assert [f[1] for f in SEGMENT_FIELDS[:3]] == [0, 4, 8]
     assert all(f[3] == 1 for f in SEGMENT_FIELDS)
-    assert SEGMENT_POINT_STEP == SEGMENT_DTYPE.itemsize == 28
+    assert SEGMENT_POINT_STEP == SEGMENT_DTYPE.itemsize == 40
     for name, offset, code, _ in SEGMENT_FIELDS:
         dt, off = SEGMENT_DTYPE.fields[name]
         assert off == offset
@@ -54,15 +56,17 @@ def test_layout_is_the_documented_one():
         assert dt.byteorder in '<|' or (dt.byteorder == '=' and np.little_endian)
     # fields are packed back to back, in order, with no gaps
     ends = [off + np.dtype(POINTFIELD_NUMPY_TYPES[c]).itemsize for _, off, c, _ in SEGMENT_FIELDS]
-    assert [f[1] for f in SEGMENT_FIELDS[1:]] == ends[:-1] and ends[-1] == 28
+    assert [f[1] for f in SEGMENT_FIELDS[1:]] == ends[:-1] and ends[-1] == 40
 
 
 def test_pack_unpack_round_trip():
     segs, ids, labels, residuals = random_segments(257)
-    data = pack_segments(segs, ids, labels, residuals)
-    assert isinstance(data, bytes) and len(data) == 257 * 28
+    rays = RNG.normal(size=(257, 3)).astype(np.float32)
+    data = pack_segments(segs, ids, labels, residuals, rays)
+    assert isinstance(data, bytes) and len(data) == 257 * 40
     rec = unpack_segments(data)
     assert rec.dtype == SEGMENT_DTYPE and rec.shape == (257,)
+    np.testing.assert_array_equal(np.stack([rec[k] for k in 'xyz'], 1), rays)
     np.testing.assert_array_equal(np.stack([rec[k] for k in ('x1', 'y1', 'x2', 'y2')], 1), segs)
     np.testing.assert_array_equal(rec['track_id'], ids)
     np.testing.assert_array_equal(rec['label'], labels)
@@ -72,11 +76,16 @@ def test_pack_unpack_round_trip():
 
 
 def test_layout_bytes_by_offset():
-    data = pack_segments([[1.5, -2.0, 3.25, 4.0]], [0xDEADBEEF], [-1], [0.125])
-    assert np.frombuffer(data, '<f4', 4, 0).tolist() == [1.5, -2.0, 3.25, 4.0]
-    assert data[16:20] == bytes.fromhex('efbeadde')          # little-endian uint32
-    assert np.frombuffer(data, '<i4', 1, 20)[0] == -1
-    assert np.frombuffer(data, '<f4', 1, 24)[0] == 0.125
+    data = pack_segments([[1.5, -2.0, 3.25, 4.0]], [0xDEADBEEF], [-1], [0.125],
+                         [[0.25, -0.5, 1.0]])
+    assert np.frombuffer(data, '<f4', 3, 0).tolist() == [0.25, -0.5, 1.0]
+    assert np.frombuffer(data, '<f4', 4, 12).tolist() == [1.5, -2.0, 3.25, 4.0]
+    assert data[28:32] == bytes.fromhex('efbeadde')          # little-endian uint32
+    assert np.frombuffer(data, '<i4', 1, 32)[0] == -1
+    assert np.frombuffer(data, '<f4', 1, 36)[0] == 0.125
+    # no rays given: NaN (a point a viewer leaves out)
+    assert np.all(np.isnan(np.frombuffer(pack_segments([[1, 2, 3, 4]], [0], [0], [0]),
+                                         '<f4', 3, 0)))
 
 
 def test_empty_and_float_labels():
@@ -99,6 +108,8 @@ def test_empty_and_float_labels():
     ((np.zeros((1, 4)), [0], [0.5], [0]), 'labels must hold integers'),
     ((np.full((1, 4), np.nan), [0], [0], [0]), 'finite'),
     ((np.array([['a'] * 4]), [0], [0], [0]), 'numeric'),
+    ((np.zeros((2, 4)), [0] * 2, [0] * 2, [0] * 2, np.zeros((2, 2))), 'rays must have shape'),
+    ((np.zeros((1, 4)), [0], [0], [0], [['a'] * 3]), 'rays must be numeric'),
 ])
 def test_pack_rejects_bad_input(args, match):
     with pytest.raises(ValueError, match=match):
@@ -107,23 +118,29 @@ def test_pack_rejects_bad_input(args, match):
 
 def test_unpack_rejects_partial_points():
     with pytest.raises(ValueError, match='multiple of point_step'):
-        unpack_segments(bytes(29))
+        unpack_segments(bytes(41))
 
 
 def test_segment_cloud_fields():
-    f = segment_cloud_fields(*random_segments(5))
-    assert (f['height'], f['width'], f['point_step'], f['row_step']) == (1, 5, 28, 140)
-    assert f['is_dense'] is True and f['is_bigendian'] is False and len(f['data']) == 140
+    rays = np.ones((5, 3))
+    f = segment_cloud_fields(*random_segments(5), rays)
+    assert (f['height'], f['width'], f['point_step'], f['row_step']) == (1, 5, 40, 200)
+    assert f['is_dense'] is True and f['is_bigendian'] is False and len(f['data']) == 200
     assert f['fields'] == SEGMENT_FIELDS
+    # a ray not known (NaN) makes the cloud not dense, as it is without rays
+    rays[2] = np.nan
+    assert segment_cloud_fields(*random_segments(5), rays)['is_dense'] is False
+    assert segment_cloud_fields(*random_segments(5))['is_dense'] is False
 
 
+@pytest.mark.ros
 def test_real_pointcloud2_serialization_round_trip():
     serialization = pytest.importorskip('rclpy.serialization')
     msgs = pytest.importorskip('sensor_msgs.msg')
     segs, ids, labels, residuals = random_segments(40)
     f = segment_cloud_fields(segs, ids, labels, residuals)
     fields = [msgs.PointField(name=n, offset=o, datatype=d, count=c) for n, o, d, c in f['fields']]
-    assert [p.datatype for p in fields[3:6]] == [
+    assert [p.datatype for p in fields[6:9]] == [
         msgs.PointField.FLOAT32, msgs.PointField.UINT32, msgs.PointField.INT32]
     cloud = msgs.PointCloud2(height=f['height'], width=f['width'], fields=fields,
                              is_bigendian=f['is_bigendian'], point_step=f['point_step'],
@@ -147,6 +164,7 @@ def test_real_pointcloud2_serialization_round_trip():
     np.testing.assert_array_equal(np.frombuffer(bytes(back.data), generic)['label'], labels)
 
 
+@pytest.mark.ros
 def test_real_image_serialization_round_trip():
     serialization = pytest.importorskip('rclpy.serialization')
     msgs = pytest.importorskip('sensor_msgs.msg')

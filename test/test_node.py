@@ -17,12 +17,11 @@ import os
 import pathlib
 import signal
 import subprocess
-import sys
 import time
 from types import SimpleNamespace
 from typing import Dict, List
 
-from dds import DdsHarness, FRAME_ID, image_msg, stamp_of
+from dds import DdsHarness, executable, FRAME_ID, image_msg, stamp_of
 from geometry_msgs.msg import TwistWithCovarianceStamped
 import numpy as np
 import pytest
@@ -37,13 +36,14 @@ from mlofc_ros.camera import CameraModel
 from mlofc_ros.messages.segments import SEGMENT_FIELDS
 from mlofc_ros.node import MlofcNode, parameter_descriptor
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info,
-                                    LINEAR_UNKNOWN_VARIANCE, parse_segments_msg, parse_twist_msg,
-                                    segments_msg, twist_msg)
+                                    LINEAR_UNKNOWN_VARIANCE, parse_segment_rays,
+                                    parse_segments_msg, parse_twist_msg, segments_msg, twist_msg)
+from mlofc_ros.tracks.undistort import undistort_segments
 
 
 pytestmark = pytest.mark.ros
 
-EXECUTABLE = pathlib.Path(sys.executable).parent / 'mlofc_node'
+CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config' / 'mlofc.yaml'
 
 
 def camera_info_msg(camera, size, t: float = 0.0) -> CameraInfo:
@@ -89,9 +89,12 @@ def send_frames(h: Harness, pub, frames, stamps, clouds: List, cam_pub=None, cam
 def test_segment_cloud_round_trip_and_empty_cloud():
     header = image_msg(np.zeros((2, 2), np.uint8), 1.5).header
     segs = np.array([[1, 2, 3, 4], [5.5, 6, 7, 8]], np.float32)
+    rays = np.array([[-0.5, 0.25, 1.0], [0.0, 0.125, 1.0]], np.float32)
     msg = segments_msg(header, segs, np.array([7, 9], np.uint32), np.array([-1, 2]),
-                       np.array([np.nan, 0.25], np.float32))
-    assert msg.width == 2 and msg.point_step == 28 and msg.row_step == 56
+                       np.array([np.nan, 0.25], np.float32), rays)
+    assert msg.width == 2 and msg.point_step == 40 and msg.row_step == 80 and msg.is_dense
+    assert [f.name for f in msg.fields[:3]] == ['x', 'y', 'z']
+    np.testing.assert_array_equal(parse_segment_rays(msg), rays)
     assert msg.header.frame_id == FRAME_ID and stamp_of(msg) == 1.5
     s, ids, labels, res = parse_segments_msg(msg)
     np.testing.assert_array_equal(s, segs)
@@ -99,8 +102,8 @@ def test_segment_cloud_round_trip_and_empty_cloud():
     assert np.isnan(res[0]) and res[1] == np.float32(0.25)
     empty = segments_msg(header, np.zeros((0, 4)), np.zeros(0, np.uint32), np.zeros(0, int),
                          np.zeros(0))
-    assert empty.width == 0 and len(empty.data) == 0 and len(empty.fields) == 7
-    msg.fields[0].offset = 4
+    assert empty.width == 0 and len(empty.data) == 0 and len(empty.fields) == 10
+    msg.fields[3].offset = 4
     with pytest.raises(ValueError, match='layout'):
         parse_segments_msg(msg)
 
@@ -175,8 +178,17 @@ def test_in_process_two_boxes_one_cloud_per_image_and_accuracy(ros):
         c = clouds[-1]
         assert [(f.name, f.offset, f.datatype, f.count) for f in c.fields] == \
             [tuple(x) for x in SEGMENT_FIELDS]
-        assert c.point_step == 28 and c.height == 1 and not c.is_bigendian
-        assert c.row_step == 28 * c.width and len(c.data) == c.row_step and c.width > 50
+        assert c.point_step == 40 and c.height == 1 and not c.is_bigendian
+        assert c.row_step == 40 * c.width and len(c.data) == c.row_step and c.width > 50
+        # x y z: the ray through each segment's undistorted midpoint at unit depth
+        segs, _, _, _ = parse_segments_msg(c)
+        und = undistort_segments(segs.astype(np.float64), seq.camera)
+        cam = seq.camera
+        want = np.stack([(0.5 * (und[:, 0] + und[:, 2]) - cam.cx) / cam.fx,
+                         (0.5 * (und[:, 1] + und[:, 3]) - cam.cy) / cam.fy,
+                         np.ones(len(und))], axis=1)
+        assert c.is_dense
+        np.testing.assert_allclose(parse_segment_rays(c), want, rtol=1e-5, atol=1e-5)
         # twists: rad/s in the image frame, linear marked unknown
         tw = twists[0][-1]
         assert tw.header.frame_id == FRAME_ID and stamp_of(tw) == stamp_of(c)
@@ -320,12 +332,11 @@ def test_in_process_bad_input_queue_drops_and_parameter_changes(ros):
 
 
 def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
-    assert EXECUTABLE.exists(), f'{EXECUTABLE} missing: pip install -e .'
     env = dict(os.environ, HOME=os.environ.get('HOME', '/tmp'), PYTHONUNBUFFERED='1')
     proc = subprocess.Popen(
-        [str(EXECUTABLE), '--ros-args', '-r', 'image:=/cam/image_raw',
-         '-r', 'camera_info:=/cam/camera_info', '-p', 'num_bodies:=3',
-         '-p', 'focal_length:=300', '-p', 'window:=3'],
+        [executable('mlofc_node'), '--ros-args', '--params-file', str(CONFIG),
+         '-r', 'image:=/cam/image_raw', '-r', 'camera_info:=/cam/camera_info',
+         '-p', 'num_bodies:=3', '-p', 'focal_length:=300', '-p', 'window:=3'],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     h = Harness()
     try:
@@ -340,8 +351,9 @@ def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
             'node did not come up'
         topics = h.topics()
         assert '/mlofc/body_3/twist' not in topics and '/image' not in topics
-        # -p focal_length:=300 (an integer) was accepted for the double
-        assert h.get_params('/mlofc', 'focal_length', 'num_bodies', 'window') == [300, 3, 3]
+        # -p focal_length:=300 (an integer) was accepted for the double, and stored as one
+        got = h.get_params('/mlofc', 'focal_length', 'num_bodies', 'window', 'max_frame_gap')
+        assert got == [300.0, 3, 3, 3.0] and type(got[0]) is float and type(got[3]) is float
         seq = small_sequence()
         send_frames(h, pub, seq.frames[:4], seq.stamps[:4], clouds)
         assert len(clouds) == 4
@@ -350,9 +362,11 @@ def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
         assert labels.max() >= 0
         res = h.set_params('/mlofc', window=1)[0]
         assert not res.successful and 'window' in res.reason
-        res = h.set_params('/mlofc', focal_length=320, num_bodies=2)
+        # as `ros2 param set /mlofc focal_length 320` sends it: an integer, read back a double
+        res = h.set_params('/mlofc', focal_length=320, num_bodies=2, warn_period=1)
         assert all(r.successful for r in res)
-        assert h.get_params('/mlofc', 'window', 'focal_length') == [3, 320]
+        got = h.get_params('/mlofc', 'window', 'focal_length', 'warn_period')
+        assert got == [3, 320.0, 1.0] and type(got[1]) is float and type(got[2]) is float
         assert h.wait(lambda: '/mlofc/body_2/twist' not in h.topics())
         send_frames(h, pub, seq.frames[4:6], seq.stamps[4:6], clouds)
     finally:
@@ -369,7 +383,7 @@ def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
 
 def test_installed_executable_refuses_invalid_parameters_with_the_reason():
     env = dict(os.environ, HOME=os.environ.get('HOME', '/tmp'))
-    proc = subprocess.run([str(EXECUTABLE), '--ros-args', '-p', 'method:=magic'], env=env,
+    proc = subprocess.run([executable('mlofc_node'), '--ros-args', '-p', 'method:=magic'], env=env,
                           capture_output=True, text=True, timeout=30)
     assert proc.returncode == 1
     out = proc.stdout + proc.stderr

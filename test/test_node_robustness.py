@@ -336,6 +336,48 @@ def test_invalid_parameters_are_rejected_with_a_reason_and_the_old_value_kept(ha
 # --- accounting and /diagnostics -------------------------------------------------------------
 
 
+def test_frames_the_node_drops_itself_never_restart_the_window(harness):
+    """
+    Keep the window through the node's own queue drops; restart it on a real gap.
+
+    A slow solver (as ``general`` is) slows the tracking worker down (the solver holds
+    Python's lock), the bounded queue drops frames, and their stamps must not read as a gap in
+    the camera's stream.
+    """
+    seq = small_sequence()
+    h = harness('/rob_drops', queue_size=1, warn_period=0.0, focal_length=300.0, window=5,
+                max_frame_gap=1.5)          # a single missing frame would be a gap
+    pipe = h.mlofc._pipeline
+    observe, solve = pipe.observe, pipe.solve
+
+    def slow_observe(*args, **kwargs):
+        time.sleep(0.03)                    # tracking slower than the stream below
+        return observe(*args, **kwargs)
+
+    def slow_solve(obs):
+        time.sleep(0.1)
+        return solve(obs)
+    pipe.observe, pipe.solve = slow_observe, slow_solve
+    dt = 1 / 30
+    for k in range(3):                      # the nominal interval, one frame at a time
+        h.frame(image_msg(seq.frames[k], 10.0 + k * dt))
+    stamps = [10.0 + k * dt for k in range(3, 33)]
+    for k, t in enumerate(stamps):
+        h.image_pub.publish(image_msg(seq.frames[k % 8], t))
+        time.sleep(0.01)
+    assert h.wait(lambda: h.mlofc.pending_frames() == 0 and h.clouds
+                  and stamp_of(h.clouds[-1]) == round(stamps[-1], 6), 60.0)
+    s = h.accounting()
+    assert s['received'] == 3 + len(stamps), s          # all arrived: no gap but the node's
+    assert s['dropped'] - s['unsolved'] >= 3, s          # the queue's own drops
+    assert not h.warnings('window restarted'), h.warnings('window restarted')
+    assert h.mlofc.last_result.window_fill == 5
+    # a gap in the camera's stream still restarts the window
+    h.frame(image_msg(seq.frames[0], stamps[-1] + 10 * dt))
+    assert h.mlofc.last_result.window_fill == 1
+    assert h.wait(lambda: h.warnings('window restarted'), 10.0)
+
+
 def statuses(box: List, name: str) -> List[DiagnosticStatus]:
     return [s for m in list(box) for s in m.status if s.name == name]
 

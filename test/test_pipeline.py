@@ -26,6 +26,7 @@ from mlofc_ros.pipeline import FOCAL_SAMPLES, FrameResult, Pipeline, TIMING_KEYS
 from mlofc_tools.render import render_sequence
 from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import segment_lines
+from mlofc_ros.tracks.undistort import undistort_segments
 
 #: The accuracy goal on the two-box sequence once the window is full.
 GOAL_MISCLASSIFIED = 0.03
@@ -415,6 +416,57 @@ def test_distorted_camera_is_undistorted_before_solving():
     truth = seq.truth[-1].segments_distorted
     m = match_truth(with_d[-1].segments, truth)
     assert np.mean(m >= 0) > 0.5        # segments are reported as seen (distorted) in the image
+    # the rays go through the undistorted midpoints (the pixel a pinhole camera would see)
+    r, cam = with_d[-1], seq.camera
+    und = undistort_segments(r.segments.astype(np.float64), cam)
+    want = np.stack([(0.5 * (und[:, 0] + und[:, 2]) - cam.cx) / cam.fx,
+                     (0.5 * (und[:, 1] + und[:, 3]) - cam.cy) / cam.fy,
+                     np.ones(len(und))], axis=1)
+    assert r.rays.dtype == np.float32 and r.rays.shape == (len(r.segments), 3)
+    np.testing.assert_allclose(r.rays, want, rtol=1e-6, atol=1e-6)
+    naive = (0.5 * (r.segments[:, 0] + r.segments[:, 2]) - cam.cx) / cam.fx
+    assert np.abs(r.rays[:, 0] - naive).max() > 1e-3     # the distortion matters here
+
+
+def test_rays_with_the_focal_length_parameter_estimated_or_unknown():
+    seq = small_sequence(4)
+    w, h = seq.frames[0].shape[::-1]
+    fixed = run(Pipeline(num_bodies=2, window=3, focal_length=400.0), seq, camera=None)[-1]
+    mid = 0.5 * (fixed.segments[:, :2] + fixed.segments[:, 2:])
+    np.testing.assert_allclose(fixed.rays[:, :2], (mid - [w / 2.0, h / 2.0]) / 400.0,
+                               rtol=1e-5, atol=1e-6)
+    assert np.all(fixed.rays[:, 2] == 1.0)
+    # no calibration: the first frame has no focal length yet, a solved one its estimate
+    p = Pipeline(num_bodies=2, window=3)
+    results = run(p, seq, camera=None)
+    assert len(results[0].rays) and np.all(np.isnan(results[0].rays))
+    last = results[-1]
+    assert math.isfinite(last.focal_length)
+    mid = 0.5 * (last.segments[:, :2] + last.segments[:, 2:])
+    np.testing.assert_allclose(last.rays[:, :2],
+                               (mid - [w / 2.0, h / 2.0]) / last.focal_length,
+                               rtol=1e-5, atol=1e-6)
+
+
+def test_frames_the_caller_dropped_do_not_restart_the_window():
+    seq = small_sequence(8)
+    p = Pipeline(num_bodies=2, window=5, focal_length=300.0, max_frame_gap=3.0)
+    dt = 1 / 30
+    for k in range(3):
+        p.observe(seq.frames[k], k * dt)
+    # six frames dropped by the caller: 7 intervals, not a gap in the camera's stream
+    obs = p.observe(seq.frames[3], 9 * dt, dropped=6)
+    assert obs.window_fill == 4 and not obs.problems
+    r = p.solve(obs)
+    assert r.problem is None or 'restarted' not in r.problem
+    # the nominal interval still is the camera's: one more dropped frame is no gap either
+    assert p.observe(seq.frames[4], 11 * dt, dropped=1).window_fill == 5
+    # a real gap beyond the dropped frames still restarts the window
+    obs = p.observe(seq.frames[5], 11 * dt + 8 * dt, dropped=2)
+    assert obs.window_fill == 1
+    assert any('window restarted' in x and 'beyond 2 dropped' in x for x in obs.problems)
+    with pytest.raises(ValueError, match='dropped'):
+        p.observe(seq.frames[6], 30 * dt, dropped=-1)
 
 
 # --- stable body ids ---------------------------------------------------------------------------

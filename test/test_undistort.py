@@ -41,8 +41,12 @@ def test_matches_cv2_undistort_points(cam):
                               P=cam.K).reshape(-1, 2)
     np.testing.assert_allclose(undistort_points(pts, cam, criteria=None), ref, atol=1e-9)
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-12)
-    ref = cv2.undistortPoints(pts.reshape(-1, 1, 2), cam.K, np.asarray(cam.d), P=cam.K,
-                              criteria=crit).reshape(-1, 2)
+    if hasattr(cv2, 'undistortPointsIter'):      # OpenCV 4 (Ubuntu 24.04: 4.6)
+        ref = cv2.undistortPointsIter(pts.reshape(-1, 1, 2), cam.K, np.asarray(cam.d), None,
+                                      cam.K, crit).reshape(-1, 2)
+    else:                                           # OpenCV 5: a keyword of undistortPoints
+        ref = cv2.undistortPoints(pts.reshape(-1, 1, 2), cam.K, np.asarray(cam.d), P=cam.K,
+                                  criteria=crit).reshape(-1, 2)
     und = undistort_points(pts, cam)
     np.testing.assert_allclose(und, ref, atol=1e-9)
     # and it is the inverse of the projection

@@ -343,7 +343,7 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
                 header = image.header
                 out.write(names['segments'], msg.timestamp_ns, segments_msg(
                     header, result.segments, result.track_ids, result.labels,
-                    result.residuals))
+                    result.residuals, result.rays))
                 for i in range(len(result.body_valid)):
                     if not result.body_valid[i]:
                         continue

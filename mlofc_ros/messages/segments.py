@@ -13,16 +13,22 @@
 # limitations under the License.
 """Field layout and packing of the node's ``~/segments`` ``sensor_msgs/PointCloud2`` (no ROS).
 
-One point per line segment, ``height = 1``, little-endian, dense, ``point_step = 28``::
+One point per line segment, ``height = 1``, little-endian, ``point_step = 40``::
 
     offset  name      type     unit / meaning
-    0       x1        FLOAT32  first endpoint u (px)
-    4       y1        FLOAT32  first endpoint v (px)
-    8       x2        FLOAT32  second endpoint u (px)
-    12      y2        FLOAT32  second endpoint v (px)
-    16      track_id  UINT32   id of the line track the segment belongs to
-    20      label     INT32    body index, -1 = unassigned
-    24      residual  FLOAT32  RMS residual of the track under its body (px-equivalent)
+    0       x         FLOAT32  viewing ray through the segment's midpoint at unit depth
+    4       y         FLOAT32    (camera optical frame: x right, y down, z forward; undistorted;
+    8       z         FLOAT32    z = 1), NaN when the focal length is not known yet
+    12      x1        FLOAT32  first endpoint u (px)
+    16      y1        FLOAT32  first endpoint v (px)
+    20      x2        FLOAT32  second endpoint u (px)
+    24      y2        FLOAT32  second endpoint v (px)
+    28      track_id  UINT32   id of the line track the segment belongs to
+    32      label     INT32    body index, -1 = unassigned
+    36      residual  FLOAT32  RMS residual of the track under its body (px-equivalent)
+
+``x y z`` come first so that RViz and Foxglove draw the cloud as points (in the image's frame,
+one unit in front of the camera) without being told which fields hold a position.
 
 :data:`SEGMENT_FIELDS` is the single definition; :data:`SEGMENT_DTYPE` and everything else
 derive from it. The node copies ``SEGMENT_FIELDS`` into ``sensor_msgs/PointField`` messages.
@@ -44,17 +50,20 @@ POINTFIELD_NUMPY_TYPES = {
 
 #: ``(name, offset in bytes, PointField datatype code, count)`` of every segment field.
 SEGMENT_FIELDS: Tuple[Tuple[str, int, int, int], ...] = (
-    ('x1', 0, FLOAT32, 1),
-    ('y1', 4, FLOAT32, 1),
-    ('x2', 8, FLOAT32, 1),
-    ('y2', 12, FLOAT32, 1),
-    ('track_id', 16, UINT32, 1),
-    ('label', 20, INT32, 1),
-    ('residual', 24, FLOAT32, 1),
+    ('x', 0, FLOAT32, 1),
+    ('y', 4, FLOAT32, 1),
+    ('z', 8, FLOAT32, 1),
+    ('x1', 12, FLOAT32, 1),
+    ('y1', 16, FLOAT32, 1),
+    ('x2', 20, FLOAT32, 1),
+    ('y2', 24, FLOAT32, 1),
+    ('track_id', 28, UINT32, 1),
+    ('label', 32, INT32, 1),
+    ('residual', 36, FLOAT32, 1),
 )
 
 #: Bytes per point (``PointCloud2.point_step``).
-SEGMENT_POINT_STEP = 28
+SEGMENT_POINT_STEP = 40
 
 #: Structured little-endian numpy dtype of one point, built from :data:`SEGMENT_FIELDS`.
 SEGMENT_DTYPE = np.dtype({
@@ -87,7 +96,8 @@ def _integer_column(values: Any, m: int, name: str, lo: int, hi: int) -> np.ndar
     return ints.astype(np.int64)
 
 
-def pack_segments(segments: Any, track_ids: Any, labels: Any, residuals: Any) -> bytes:
+def pack_segments(segments: Any, track_ids: Any, labels: Any, residuals: Any,
+                  rays: Any = None) -> bytes:
     """Pack segments into ``PointCloud2.data`` bytes laid out as :data:`SEGMENT_FIELDS`.
 
     Parameters
@@ -100,6 +110,9 @@ def pack_segments(segments: Any, track_ids: Any, labels: Any, residuals: Any) ->
         Body index per segment, ``-1`` = unassigned (``-1 <= label < 2**31``).
     residuals : (M,) float
         Residual per segment (px-equivalent); NaN allowed for "not computed".
+    rays : (M, 3) float or None
+        ``x y z`` of every segment: its viewing ray at unit depth (see the module doc); NaN
+        allowed (not known yet); None = all NaN.
 
     Returns
     -------
@@ -122,7 +135,14 @@ def pack_segments(segments: Any, track_ids: Any, labels: Any, residuals: Any) ->
         raise ValueError('residuals must have shape (%d,), got %s' % (m, res.shape))
     if m and res.dtype.kind not in 'iuf':
         raise ValueError('residuals must be numeric, got dtype %s' % res.dtype)
+    xyz = np.full((m, 3), np.nan) if rays is None else np.asarray(rays)
+    if xyz.shape != (m, 3):
+        raise ValueError('rays must have shape (%d, 3), got %s' % (m, xyz.shape))
+    if m and xyz.dtype.kind not in 'iuf':
+        raise ValueError('rays must be numeric, got dtype %s' % xyz.dtype)
     out = np.empty(m, SEGMENT_DTYPE)
+    for k, name in enumerate(('x', 'y', 'z')):
+        out[name] = xyz[:, k]
     for k, name in enumerate(('x1', 'y1', 'x2', 'y2')):
         out[name] = seg[:, k]
     out['track_id'] = ids
@@ -134,9 +154,9 @@ def pack_segments(segments: Any, track_ids: Any, labels: Any, residuals: Any) ->
 def unpack_segments(data: Any) -> np.ndarray:
     """Unpack ``PointCloud2.data`` (bytes-like or list of byte values) into ``(M,)`` records.
 
-    Returns a writable structured array of dtype :data:`SEGMENT_DTYPE` (fields ``x1, y1, x2,
-    y2`` px, ``track_id``, ``label``, ``residual``). Raises ``ValueError`` if the length is not
-    a multiple of :data:`SEGMENT_POINT_STEP`.
+    Returns a writable structured array of dtype :data:`SEGMENT_DTYPE` (fields ``x, y, z``
+    (the ray), ``x1, y1, x2, y2`` px, ``track_id``, ``label``, ``residual``). Raises
+    ``ValueError`` if the length is not a multiple of :data:`SEGMENT_POINT_STEP`.
     """
     buf = as_byte_array(data)
     if buf.size % SEGMENT_POINT_STEP:
@@ -146,15 +166,17 @@ def unpack_segments(data: Any) -> np.ndarray:
 
 
 def segment_cloud_fields(segments: Any, track_ids: Any, labels: Any,
-                         residuals: Any) -> Dict[str, Any]:
+                         residuals: Any, rays: Any = None) -> Dict[str, Any]:
     """Return every ``sensor_msgs/PointCloud2`` field but ``header`` for the given segments.
 
     ``fields`` is :data:`SEGMENT_FIELDS` (the caller turns the tuples into ``PointField``);
-    ``height = 1``, ``width = M``, ``is_bigendian = False``, ``point_step = 28``,
-    ``row_step = 28 * M``, ``is_dense = True`` and ``data`` from :func:`pack_segments`.
+    ``height = 1``, ``width = M``, ``is_bigendian = False``, ``point_step = 40``,
+    ``row_step = 40 * M``, ``data`` from :func:`pack_segments`, and ``is_dense`` True when
+    every ray is finite (a point with NaN ``x y z`` is invalid to a point-cloud viewer).
     """
-    data = pack_segments(segments, track_ids, labels, residuals)
+    data = pack_segments(segments, track_ids, labels, residuals, rays)
     m = len(data) // SEGMENT_POINT_STEP
+    dense = rays is not None and bool(np.all(np.isfinite(np.asarray(rays, dtype=np.float64))))
     return {
         'height': 1,
         'width': m,
@@ -163,5 +185,5 @@ def segment_cloud_fields(segments: Any, track_ids: Any, labels: Any,
         'point_step': SEGMENT_POINT_STEP,
         'row_step': SEGMENT_POINT_STEP * m,
         'data': data,
-        'is_dense': True,
+        'is_dense': dense or m == 0,
     }

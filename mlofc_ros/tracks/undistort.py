@@ -32,6 +32,19 @@ CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-12)
 Criteria = Optional[Tuple[int, int, float]]
 
 
+def _undistort_points_iter(src: np.ndarray, K: np.ndarray, d: np.ndarray,  # noqa: N803
+                           criteria: Criteria) -> np.ndarray:
+    """
+    Run ``cv2.undistortPoints`` with termination criteria on any OpenCV the package supports.
+
+    OpenCV 4.x (4.6 is Ubuntu 24.04's) has them in ``undistortPointsIter``; 5.x dropped that
+    function for a ``criteria`` keyword of ``undistortPoints``.
+    """
+    if hasattr(cv2, 'undistortPointsIter'):
+        return cv2.undistortPointsIter(src, K, d, None, K, criteria)
+    return cv2.undistortPoints(src, K, d, R=None, P=K, criteria=criteria)
+
+
 def undistort_points(points: np.ndarray, camera: CameraModel,
                      criteria: Criteria = CRITERIA) -> np.ndarray:
     """Undistort pixel points (N, 2) ``(u, v)`` of ``camera``; return (N, 2) float64 px.
@@ -60,7 +73,7 @@ def undistort_points(points: np.ndarray, camera: CameraModel,
         if criteria is None:
             out = cv2.undistortPoints(src, K, d, R=None, P=K)
         else:
-            out = cv2.undistortPoints(src, K, d, R=None, P=K, criteria=criteria)
+            out = _undistort_points_iter(src, K, d, criteria)
     else:   # CameraModel validates models; keep a clear message for duck-typed cameras
         raise ValueError(f'unsupported distortion model {model!r}')
     return out.reshape(-1, 2).astype(np.float64)

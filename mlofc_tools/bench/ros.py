@@ -14,7 +14,7 @@
 """
 The running node under rising image rates: drops, throughput and latency over DDS.
 
-``mlofc_node`` runs in its own process on a fresh ``ROS_DOMAIN_ID`` (localhost discovery). It is
+``mlofc_node`` runs in its own process on its own ``ROS_DOMAIN_ID`` (localhost discovery). It is
 started through a thin wrapper (``python -m mlofc_tools.bench.ros --child STATS -- --ros-args
 ...``) that builds the same :class:`~mlofc_ros.node.MlofcNode` as the console script and spins
 it the same way, and in addition writes the node's own counters (``stats``: received,
