@@ -442,7 +442,7 @@ def test_writer_never_leaves_a_half_written_bag(tmp_path):
 
 
 def test_mlofc_bag_processes_a_cut_recording(tmp_path, capsys):
-    from mlofc_ros.render import render_sequence
+    from mlofc_tools.render import render_sequence
     seq = render_sequence(n_boxes=1, n_frames=36, size=(320, 240), seed=3)
     write_image_bag(tmp_path / 'rec', seq.frames, seq.stamps, seq.camera)
     mcap = tmp_path / 'rec' / 'rec.mcap'
@@ -465,7 +465,7 @@ def test_mlofc_bag_processes_a_cut_recording(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_interrupted_mlofc_bag_keeps_a_finished_bag(tmp_path):
-    from mlofc_ros.render import render_sequence
+    from mlofc_tools.render import render_sequence
     seq = render_sequence(n_boxes=1, n_frames=200, size=(320, 240), seed=3)
     write_image_bag(tmp_path / 'in', seq.frames, seq.stamps, seq.camera)
     proc = subprocess.Popen([executable('mlofc_bag'), str(tmp_path / 'in'), str(tmp_path / 'out')],

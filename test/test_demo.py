@@ -75,9 +75,9 @@ def test_demo_fails_cleanly_when_the_node_does_not_answer(tmp_path, monkeypatch,
 
 def test_demo_uses_the_domain_the_environment_sets(monkeypatch):
     monkeypatch.setenv('ROS_DOMAIN_ID', '42')
-    assert demo.fresh_domain_id() == 42
+    assert demo_node.fresh_domain_id() == 42
     monkeypatch.delenv('ROS_DOMAIN_ID')
-    assert 1 <= demo.fresh_domain_id() <= 100
+    assert 1 <= demo_node.fresh_domain_id() <= 100
 
 
 def test_summary_survives_a_node_that_found_nothing():
