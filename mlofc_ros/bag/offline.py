@@ -236,6 +236,61 @@ def _first_camera(bag: BagReader, info_topic: Optional[str]
     return None
 
 
+def _describe_input(bag: BagReader, stats: 'OfflineStats', image_topic: Optional[str],
+                    camera_info_topic: Optional[str], input_path: str, log: TextIO) -> None:
+    """Choose the input topics into ``stats``; warn of an incomplete bag or no CameraInfo."""
+    stats.image_topic, stats.camera_info_topic = choose_topics(
+        bag.topics, image_topic, camera_info_topic, input_path)
+    if bag.incomplete:
+        stats.incomplete, stats.recovered = True, bag.message_count
+        log.write(f'mlofc_bag: warning: {input_path}: incomplete bag '
+                  f'({"; ".join(bag.problems)}); recovered {bag.message_count} complete '
+                  f'messages ({bag.message_counts.get(stats.image_topic, 0)} images); '
+                  '--strict refuses such a bag\n')
+    if stats.camera_info_topic is None:
+        log.write(f'mlofc_bag: no CameraInfo topic for {stats.image_topic}; the focal '
+                  'length is estimated (or set -p focal_length:=...)\n')
+    stats.images = bag.message_counts.get(stats.image_topic, 0)
+    if stats.images == 0:
+        raise BagError(f'{input_path}: image topic {stats.image_topic} has no messages')
+
+
+def _add_output_topics(out: BagWriter, stats: 'OfflineStats', names: Dict[str, str],
+                       copy_input: bool, n_bodies: int, debug_image: bool) -> None:
+    """Declare the output bag's topics: the input copy, the segments, twists, debug image."""
+    if copy_input:
+        out.add_topic(stats.image_topic, IMAGE_TYPE, 'sensor_data')
+        if stats.camera_info_topic:
+            out.add_topic(stats.camera_info_topic, CAMERA_INFO_TYPE, 'reliable')
+    out.add_topic(names['segments'], SEGMENTS_TYPE)
+    for i in range(n_bodies):
+        out.add_topic(names['body'].format(i=i), TWIST_TYPE)
+    if debug_image:
+        out.add_topic(names['debug_image'], IMAGE_TYPE)
+
+
+def _write_result(out: BagWriter, names: Dict[str, str], timestamp_ns: int, header: Any,
+                  gray: Any, result: Any, debug_image: bool) -> None:
+    """Write one solved frame's messages (as the node publishes them) into ``out``."""
+    from mlofc_ros.messages.debug import draw_debug
+    from mlofc_ros.ros_messages import debug_image_msg, segments_msg, twist_msg
+
+    out.write(names['segments'], timestamp_ns, segments_msg(
+        header, result.segments, result.track_ids, result.labels, result.residuals, result.rays))
+    for i in range(len(result.body_valid)):
+        if not result.body_valid[i]:
+            continue
+        topic = names['body'].format(i=i)
+        out.add_topic(topic, TWIST_TYPE)
+        out.write(topic, timestamp_ns, twist_msg(
+            header, result.angular_velocities[i], result.angular_covariances[i]))
+    if debug_image:
+        bgr = draw_debug(gray, result.segments, result.labels, result.track_ids,
+                         result.angular_velocities, result.body_valid)
+        out.write(names['debug_image'], timestamp_ns,
+                  serialize(debug_image_msg(header, bgr), IMAGE_TYPE))
+
+
 def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str] = None,
                 camera_info_topic: Optional[str] = None,
                 parameters: Optional[Dict[str, Any]] = None, node_name: str = 'mlofc',
@@ -257,10 +312,8 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
     """
     out_log: TextIO = sys.stderr if log is None else log
     from mlofc_ros.image.decode import image_msg_to_gray
-    from mlofc_ros.messages.debug import draw_debug
     from mlofc_ros.pipeline import Pipeline
-    from mlofc_ros.ros_messages import (debug_image_msg, segments_msg, stamp_to_seconds,
-                                        twist_msg)
+    from mlofc_ros.ros_messages import stamp_to_seconds
 
     values = mlofc_params.check_all(dict(parameters or {}))
     pipeline = Pipeline(**values)
@@ -279,20 +332,7 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
             out_log.write(f'\nmlofc_bag: warning: {text} (further ones counted)\n')
 
     with BagReader(input_path, strict=strict) as bag:
-        stats.image_topic, stats.camera_info_topic = choose_topics(
-            bag.topics, image_topic, camera_info_topic, input_path)
-        if bag.incomplete:
-            stats.incomplete, stats.recovered = True, bag.message_count
-            out_log.write(f'mlofc_bag: warning: {input_path}: incomplete bag '
-                          f'({"; ".join(bag.problems)}); recovered {bag.message_count} complete '
-                          f'messages ({bag.message_counts.get(stats.image_topic, 0)} images); '
-                          '--strict refuses such a bag\n')
-        if stats.camera_info_topic is None:
-            out_log.write(f'mlofc_bag: no CameraInfo topic for {stats.image_topic}; the focal '
-                          'length is estimated (or set -p focal_length:=...)\n')
-        stats.images = bag.message_counts.get(stats.image_topic, 0)
-        if stats.images == 0:
-            raise BagError(f'{input_path}: image topic {stats.image_topic} has no messages')
+        _describe_input(bag, stats, image_topic, camera_info_topic, input_path, out_log)
         pairing = CameraInfoPairing(_first_camera(bag, stats.camera_info_topic))
         read = [stats.image_topic] + ([stats.camera_info_topic] if stats.camera_info_topic
                                       else [])
@@ -302,15 +342,7 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
         # the flag outlives the writer: a Ctrl-C while the bag is finished does not abort it
         with StopOnSigint() as stop, BagWriter(output_path, storage=storage,
                                                overwrite=overwrite) as out:
-            if copy_input:
-                out.add_topic(stats.image_topic, IMAGE_TYPE, 'sensor_data')
-                if stats.camera_info_topic:
-                    out.add_topic(stats.camera_info_topic, CAMERA_INFO_TYPE, 'reliable')
-            out.add_topic(names['segments'], SEGMENTS_TYPE)
-            for i in range(n_fixed):
-                out.add_topic(names['body'].format(i=i), TWIST_TYPE)
-            if debug_image:
-                out.add_topic(names['debug_image'], IMAGE_TYPE)
+            _add_output_topics(out, stats, names, copy_input, n_fixed, debug_image)
             done = 0
             for msg in bag.messages(read):
                 if stop.requested:
@@ -340,22 +372,8 @@ def process_bag(input_path: str, output_path: str, *, image_topic: Optional[str]
                     continue
                 stats.processed += 1
                 stats.pipeline_ms.append(float(result.timings.get('total', math.nan)))
-                header = image.header
-                out.write(names['segments'], msg.timestamp_ns, segments_msg(
-                    header, result.segments, result.track_ids, result.labels,
-                    result.residuals, result.rays))
-                for i in range(len(result.body_valid)):
-                    if not result.body_valid[i]:
-                        continue
-                    topic = names['body'].format(i=i)
-                    out.add_topic(topic, TWIST_TYPE)
-                    out.write(topic, msg.timestamp_ns, twist_msg(
-                        header, result.angular_velocities[i], result.angular_covariances[i]))
-                if debug_image:
-                    bgr = draw_debug(gray, result.segments, result.labels, result.track_ids,
-                                     result.angular_velocities, result.body_valid)
-                    out.write(names['debug_image'], msg.timestamp_ns,
-                              serialize(debug_image_msg(header, bgr), IMAGE_TYPE))
+                _write_result(out, names, msg.timestamp_ns, image.header, gray, result,
+                              debug_image)
                 if progress is not None:
                     progress.update(done, f'{len(result.segments)} segments')
             stats.written = dict(out.counts)
