@@ -43,11 +43,12 @@ drops the stalest frame), so the executor is never blocked by the work and any e
 (``rclpy.spin``, a MultiThreadedExecutor, ...) can host the node. The tracking worker
 decodes every queued image, tracks its lines and adds them to the window
 (:meth:`Pipeline.observe`). A fast solve (the last one under :data:`INLINE_SOLVE_S`) follows in
-the same thread (:meth:`Pipeline.solve`, then publishing). A slow one (method ``general``:
-1-3 s per window) goes to a solver worker, which segments the newest window it has not
-solved yet while the tracking worker goes on: the tracker still sees every frame, so its
-tracks survive; the frames tracked while the solver was busy are not published (counted as
-dropped, ``unsolved`` in ``stats``) except the newest, which it solves next.
+the same thread (:meth:`Pipeline.solve`, then publishing). A slow method's
+(:attr:`mlofc_ros.solver.Method.slow`: 1-3 s per window) goes to a solver worker, which
+segments the newest window it has not solved yet while the tracking worker goes on: the
+tracker still sees every frame, so its tracks survive; the frames tracked while the solver
+was busy are not published (counted as dropped, ``unsolved`` in ``stats``) except the newest,
+which it solves next.
 Parameters: see :mod:`mlofc_ros.params` (``ros2 param describe /mlofc <name>``); all can be
 changed at run time, invalid values are rejected with the reason and the old value kept. Write
 doubles as ``-p focal_length:=500.0`` (``:=500`` is accepted too: doubles are declared with
@@ -81,6 +82,7 @@ from mlofc_ros.messages.debug import draw_debug
 from mlofc_ros.pipeline import FrameResult, Observation, Pipeline
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
                                     segments_msg, stamp_to_seconds, twist_msg)
+from mlofc_ros.solver import get_method
 
 #: Reliable output QoS: keeps up to this many messages per topic for slow subscribers.
 OUTPUT_DEPTH = 10
@@ -91,8 +93,6 @@ PROBLEM_HOLD = 5.0
 #: The tracking worker solves a frame itself when the solver worker is idle and the last
 #: solve took less than this (s); otherwise the solver worker does, while tracking goes on.
 INLINE_SOLVE_S = 0.03
-#: Solver methods always left to the solver worker (their first search takes seconds).
-SLOW_METHODS = ('general',)
 
 
 #: Most kinds of problem remembered for throttling (a flood of new kinds restarts the table).
@@ -412,10 +412,11 @@ class MlofcNode(Node):
         with self._lock:
             # a fast solver runs here, in turn with the tracking: handing every frame over to
             # the solver worker would make two Python threads contend for the GIL (measured:
-            # 60 Hz no longer kept up with); a slow one (general) runs in its own worker
+            # 60 Hz no longer kept up with); a slow method (its first search takes seconds)
+            # always runs in its own worker
             inline = (self._observed is None and not self._solving
                       and self._last_solve_s < INLINE_SOLVE_S
-                      and self._pipeline.params['method'] not in SLOW_METHODS)
+                      and not get_method(self._pipeline.params['method']).slow)
             if inline:
                 self._solving = True
             else:

@@ -39,8 +39,8 @@ import numpy as np
 from mlofc_ros import params as _params
 from mlofc_ros.bodies import BodyTracker, relabel
 from mlofc_ros.camera import as_camera, CameraLike, CameraModel
-from mlofc_ros.solver import segment_lines
-from mlofc_ros.solver.robust import WARM_INLIERS as ROBUST_WARM_INLIERS
+from mlofc_ros.solver import get_method, Method, segment_lines, SegmentationResult, WarmStart
+from mlofc_ros.solver.robust import WARM_INLIERS
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_ros.tracks.undistort import undistort_segments
@@ -57,36 +57,15 @@ MIN_BODY_TRACKS = 4
 #: With no calibration, the focal length is fixed to the median of this many window estimates.
 FOCAL_SAMPLES = 8
 
-#: Method 'general' answers with the rotation-only solve ('robust') until the window holds this
-#: many frames (or all of a shorter window). Its first, cold search decides the grouping the
-#: warm starts then track; on 3 frames (2 constraints per line) it was often wrong and stayed
-#: so. Spinning benchmark, window 10, mean wrong % own2+bg / own3+bg / own2 / own3 over render
-#: seeds 0-5 (3 -> 5): 2.3 / 10.4 / 0.4 / 3.0 -> 3.8 / 5.5 / 0.4 / 2.6, held-out seeds 6-8
-#: 3.4 / 3.8 / 0.0 / 0.5 -> 1.5 / 3.1 / 0.0 / 0.1; 4 frames (3.1 / 10.2 / 0.5 / -) and the
-#: whole window (10: 4.3 / 22.6 / 1.1 / 0.4) were worse (session 13).
-GENERAL_MIN_FRAMES = 5
-
-#: The rotation-only solve returns the previous window's labels without a search when they keep
-#: 75% of the tracks inliers (:data:`mlofc_ros.solver.robust.WARM_INLIERS`). A real scene that
-#: the rotation model explains only in part stays below that: visp_cube's warm starts kept
-#: 64-74%, every search then found fewer (40-64%), at 4-5 ms instead of 1.5 ms, in 40% of the
-#: frames. After a search, a warm start is accepted when it keeps what the search kept less
-#: WARM_FLOOR_MARGIN, for the next WARM_FLOOR_SOLVES solves (then a search looks again).
+#: A method that takes ``warm_inliers`` returns the previous window's labels without a search
+#: when they keep 75% of the tracks inliers (:data:`mlofc_ros.solver.robust.WARM_INLIERS`). A
+#: real scene that the rotation model explains only in part stays below that: visp_cube's warm
+#: starts kept 64-74%, every search then found fewer (40-64%), at 4-5 ms instead of 1.5 ms, in
+#: 40% of the frames. After a search, a warm start is accepted when it keeps what the search
+#: kept less WARM_FLOOR_MARGIN, for the next WARM_FLOOR_SOLVES solves (then a search looks
+#: again).
 WARM_FLOOR_MARGIN = 0.05
 WARM_FLOOR_SOLVES = 10
-
-#: Method 'general': every tracked body is refitted from the pivot starts at every warm solve
-#: (``segment_lines(..., rescan=...)``), not one body per solve in turn. A body tracked in a
-#: wrong basin then gets its way out at the next solve instead of after up to ``num_bodies``
-#: of them, and the solver's path no longer depends on how the body ids are numbered (the
-#: turn went by id, so ids that changed hands changed which body was searched; the warm path
-#: itself is numbering-blind). Spinning benchmark, window 10, 30 frames, render seeds 0-11,
-#: mean wrong % own2+bg / own3+bg / own2 / own3, one in turn -> all: 4.5 / 6.0 / 0.19 / 2.1
-#: -> 3.1 / 4.7 / 0.18 / 1.1; the gains are on the runs that start in a wrong basin (own2+bg
-#: s6 13.5 -> 4.4, s9 9.7 -> 2.9, own3+bg s3 22.3 -> 16.9, s9 15.9 -> 3.0, own3 s2 22.9 ->
-#: 10.2), the losses within 1.6 points. +32% CPU per frame with 4 bodies (session 21,
-#: docs/design.md).
-RESCAN_EVERY_BODY = True
 
 
 @dataclass
@@ -242,6 +221,64 @@ class Observation:
         return dataclasses.replace(self, resets=self.resets | older.resets, problems=problems)
 
 
+class _WarmStarts:
+    """What the solves of a stream hand to the next one: the solver's warm start.
+
+    Per stable body id the last motion the labels were made with (methods whose warm start
+    is :attr:`WarmStart.MOTIONS`), and the lowered ``warm_inliers`` after a search
+    (:data:`WARM_FLOOR_MARGIN`) with the solves it has left. The previous labels themselves
+    come from the body tracker.
+    """
+
+    def __init__(self) -> None:
+        self.motions: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}
+        self.floor: Optional[Tuple[float, int]] = None
+
+    def reset(self) -> None:
+        """Forget everything (the body ids restart)."""
+        self.motions.clear()
+        self.floor = None
+
+    def keywords(self, method: Method, labels: Optional[np.ndarray], n: int) -> Dict[str, Any]:
+        """Return the keywords of :func:`segment_lines` for a solve by ``method`` of n bodies.
+
+        ``labels``: the previous stable body id of every track of the window (``-1`` none),
+        None when there is no warm start (``num_bodies`` automatic).
+        """
+        if labels is None or method.warm_start is WarmStart.NONE:
+            return {}
+        out: Dict[str, Any] = dict(method.fixed, init_labels=np.where(labels < n, labels, -1))
+        if method.warm_start is WarmStart.MOTIONS and self.motions:
+            w = np.full((n, 3), np.nan)
+            t = np.full((n, 3), np.nan)
+            for body, (w_b, t_b) in self.motions.items():
+                if body < n:
+                    w[body], t[body] = w_b, t_b
+            out['init_motions'] = (w, t)
+            if method.rescans:
+                out['rescan'] = list(range(n))
+        if method.accepts('warm_inliers') and self.floor is not None:
+            floor, left = self.floor
+            out['warm_inliers'] = min(floor, WARM_INLIERS)
+            self.floor = (floor, left - 1) if left > 1 else None
+        return out
+
+    def solved(self, method: Method, res: SegmentationResult) -> None:
+        """Note a solve by ``method``: after a search past the warm start, lower the bar."""
+        if method.accepts('warm_inliers') and res.diagnostics.warm_rejected:
+            share = res.diagnostics.inlier_share or 0.0
+            self.floor = (max(share - WARM_FLOOR_MARGIN, 0.0), WARM_FLOOR_SOLVES)
+
+    def remember(self, res: SegmentationResult, ids: np.ndarray, valid: np.ndarray) -> None:
+        """Keep the motions of the valid bodies of ``res`` under their stable ``ids``."""
+        if res.translation_directions is None:
+            return
+        segmented = np.asarray(res.segmentation_angular_velocities, dtype=float).reshape(-1, 3)
+        for j in np.flatnonzero(valid):                  # bodies, not lines
+            self.motions[int(ids[j])] = (segmented[j],
+                                         np.asarray(res.translation_directions[j]))
+
+
 def segment_rays(segments: np.ndarray,
                  intrinsics: Optional[Tuple[float, float, float, float]]) -> np.ndarray:
     """
@@ -365,15 +402,8 @@ class Pipeline:
         # being re-estimated at every frame (100x the cost of a known-f solve)
         self._focal_samples: List[float] = []
         self._focal_fixed: Optional[float] = None
-        # method 'general': the last motion (rad/frame, unit T) of every stable body id, the
-        # warm start of the next window
-        self._motions: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}
-        # 'general': the body whose tracked fit also rescans the pivot starts (one per frame in
-        # turn, so that a body tracked in a wrong basin can leave it at a fraction of the cost
-        # of rescanning all of them every frame)
-        self._rescan = 0
-        # the lowered warm-start share after a search (WARM_FLOOR_MARGIN) and the solves left
-        self._warm_floor: Optional[Tuple[float, int]] = None
+        # what a solve hands to the next: the solver's warm start besides the labels
+        self._warm = _WarmStarts()
         # solve-side resets not handed over yet (a tracker failure, a skipped frame's): the
         # next observation carries them
         self._pending_resets: Set[str] = set()
@@ -410,8 +440,7 @@ class Pipeline:
             self._stamps = deque(maxlen=self.params['window'])
         if 'num_bodies' in changed:
             self.bodies.reset()
-            self._motions.clear()
-            self._warm_floor = None
+            self._warm.reset()
 
     def reset(self) -> None:
         """Forget all state (tracks, window, body ids, stamps), as at construction.
@@ -422,9 +451,7 @@ class Pipeline:
         self._tracker.reset()
         self._restart_window()
         self.bodies.reset()
-        self._motions.clear()
-        self._rescan = 0
-        self._warm_floor = None
+        self._warm.reset()
         self._intervals.clear()
         self._last_stamp = None
         self._image_size = None
@@ -603,7 +630,40 @@ class Pipeline:
         cam = as_camera(camera)
         problems: List[str] = []
         resets: Set[str] = set()
+        self._check_image_size(size, problems, resets)
+        if not self._check_stamp(stamp, problems, resets, dropped):
+            self._pending_resets |= resets     # for the next observation to carry
+            return Observation.skip(stamp, gray, f'duplicate stamp {stamp:.9f} s; frame '
+                                    'skipped', self.window_fill)
+        intrinsics, undistort_cam = self._intrinsics(cam, size)
+        if undistort_cam != self._undistort_camera:
+            self._restart_window()        # stored endpoints were corrected with another model
+            self._undistort_camera = undistort_cam
+        timings: Dict[str, float] = {}
+        blank = lines is None and int(gray.max()) - int(gray.min()) <= BLANK_CONTRAST
+        track_ids, segments = self._frame_lines(gray, lines, blank, problems, timings)
+        t = time.perf_counter()
+        corrected = segments
+        if undistort_cam is not None and len(segments):
+            corrected = np.asarray(undistort_segments(segments, undistort_cam),
+                                   dtype=np.float64).reshape(-1, 4)
+        timings['undistort'] = (time.perf_counter() - t) * 1e3
+        t = time.perf_counter()
+        win_ids, win_tracks = self._push(track_ids, corrected, stamp)
+        timings['window'] = (time.perf_counter() - t) * 1e3
+        resets |= self._pending_resets
+        self._pending_resets = set()
+        return Observation(stamp=stamp, gray=gray, segments=segments, track_ids=track_ids,
+                           win_ids=win_ids, win_tracks=win_tracks, intrinsics=intrinsics,
+                           image_size=size, window_fill=len(self._stamps),
+                           frame_interval=self._frame_interval(), blank=blank,
+                           problems=problems, timings=timings, resets=frozenset(resets),
+                           elapsed_ms=(time.perf_counter() - t0) * 1e3,
+                           undistorted=corrected if corrected is not segments else None)
 
+    def _check_image_size(self, size: Tuple[int, int], problems: List[str],
+                          resets: Set[str]) -> None:
+        """Restart the tracks (and forget the focal length) when the image size changes."""
         if self._image_size is not None and size != self._image_size:
             problems.append(f'image size changed from {self._image_size[0]}x'
                             f'{self._image_size[1]} to {size[0]}x{size[1]}; tracks restarted')
@@ -613,12 +673,18 @@ class Pipeline:
             self._focal_fixed = None    # the solve side forgets its samples (resets)
         self._image_size = size
 
+    def _check_stamp(self, stamp: float, problems: List[str], resets: Set[str],
+                     dropped: int = 0) -> bool:
+        """Check the stamp against the last frame's; False for a duplicate (skip the frame).
+
+        A stamp that went back (a bag loop, a clock reset) restarts the tracks and the body
+        ids; a gap over ``max_frame_gap`` frame intervals beyond the ``dropped`` frames the
+        caller did not pass on restarts the tracks.
+        """
         if self._last_stamp is not None:
             dt = stamp - self._last_stamp
             if dt == 0.0:
-                self._pending_resets |= resets     # for the next observation to carry
-                return Observation.skip(stamp, gray, f'duplicate stamp {stamp:.9f} s; frame '
-                                        'skipped', self.window_fill)
+                return False
             if dt < 0.0:
                 problems.append(f'stamp went back {-dt:.3f} s (bag loop or clock reset); '
                                 'tracks and window restarted')
@@ -641,15 +707,14 @@ class Pipeline:
                 else:
                     self._intervals.append(dt / (1 + dropped))
         self._last_stamp = stamp
+        return True
 
-        intrinsics, undistort_cam = self._intrinsics(cam, size)
-        if undistort_cam != self._undistort_camera:
-            self._restart_window()        # stored endpoints were corrected with another model
-            self._undistort_camera = undistort_cam
-
-        timings: Dict[str, float] = {}
+    def _frame_lines(self, gray: Optional[np.ndarray],
+                     lines: Optional[Tuple[np.ndarray, np.ndarray]], blank: bool,
+                     problems: List[str], timings: Dict[str, float]
+                     ) -> Tuple[np.ndarray, np.ndarray]:
+        """Return the frame's track ids and segments: the caller's ``lines``, or ``gray``'s."""
         t = time.perf_counter()
-        blank = lines is None and int(gray.max()) - int(gray.min()) <= BLANK_CONTRAST
         if lines is not None:
             track_ids, segments = lines
         elif blank:
@@ -671,36 +736,29 @@ class Pipeline:
         timings['detect_track'] = (time.perf_counter() - t) * 1e3
         ran = gray is not None and not blank and self._tracker.last_timing['detected']
         timings['detect'] = self._tracker.last_timing['detect'] * 1e3 if ran else 0.0
+        return track_ids, segments
 
-        t = time.perf_counter()
-        corrected = segments
-        if undistort_cam is not None and len(segments):
-            corrected = np.asarray(undistort_segments(segments, undistort_cam),
-                                   dtype=np.float64).reshape(-1, 4)
-        timings['undistort'] = (time.perf_counter() - t) * 1e3
+    def _push(self, track_ids: np.ndarray, corrected: np.ndarray, stamp: float
+              ) -> Tuple[np.ndarray, np.ndarray]:
+        """Add the frame's (undistorted) segments to the window; its tracks ``(ids, (N, K, 4))``.
 
-        t = time.perf_counter()
+        Tracks seen in at least ``min_track_frames`` frames (or every frame of a shorter
+        window, and at least 2).
+        """
         self._window.push(track_ids, corrected)
         self._stamps.append(stamp)
         min_frames = min(int(self.params['min_track_frames']), len(self._stamps))
         min_frames = max(min_frames, 2)
         win_ids, win_tracks = self._window.tracks(min_frames=min_frames)
-        win_ids = np.asarray(win_ids).astype(np.int64).ravel()
-        timings['window'] = (time.perf_counter() - t) * 1e3
+        return (np.asarray(win_ids).astype(np.int64).ravel(),
+                np.asarray(win_tracks, dtype=np.float64))
 
-        fill = len(self._stamps)
+    def _frame_interval(self) -> float:
+        """Median frame interval of the window (s); NaN with fewer than two frames."""
         stamps = list(self._stamps)
-        interval = (float(statistics.median([b - a for a, b in zip(stamps, stamps[1:])]))
-                    if fill >= 2 else math.nan)
-        resets |= self._pending_resets
-        self._pending_resets = set()
-        return Observation(stamp=stamp, gray=gray, segments=segments, track_ids=track_ids,
-                           win_ids=win_ids, win_tracks=np.asarray(win_tracks, dtype=np.float64),
-                           intrinsics=intrinsics, image_size=size, window_fill=fill,
-                           frame_interval=interval, blank=blank, problems=problems,
-                           timings=timings, resets=frozenset(resets),
-                           elapsed_ms=(time.perf_counter() - t0) * 1e3,
-                           undistorted=corrected if corrected is not segments else None)
+        if len(stamps) < 2:
+            return math.nan
+        return float(statistics.median([b - a for a, b in zip(stamps, stamps[1:])]))
 
     def solve(self, obs: Observation) -> FrameResult:
         """Segment the window of ``obs`` (from :meth:`observe`) and return the frame's result.
@@ -709,131 +767,142 @@ class Pipeline:
         :meth:`observe` of later frames.
         """
         t0 = time.perf_counter()
-        if 'tracks' in obs.resets:
-            self.bodies.forget_tracks()     # the tracker restarted and may reuse track ids
-        if 'bodies' in obs.resets:
-            self.bodies.reset()
-            self._motions.clear()
-            self._warm_floor = None
-        if 'focal' in obs.resets:
-            self._forget_focal()
+        self._apply_resets(obs.resets)
         if obs.skipped:
             return self._empty(obs.stamp, '; '.join(obs.problems) or None, skipped=True,
                                fill=obs.window_fill)
-        stamp = obs.stamp
         problems = list(obs.problems)
         timings = dict(obs.timings)
-        segments, track_ids = obs.segments, obs.track_ids
-        win_ids, win_tracks = obs.win_ids, obs.win_tracks
-        intrinsics, size, fill = obs.intrinsics, obs.image_size, obs.window_fill
-        interval = obs.frame_interval
-        n_req = int(self.params['num_bodies'])
-        labels = np.full(len(segments), -1, dtype=np.int32)
-        carried = np.zeros(len(segments), dtype=bool)
-        residuals = np.full(len(segments), np.nan, dtype=np.float32)
-        focal = math.nan
-        res = None
         t = time.perf_counter()
-        if fill >= 2 and len(win_ids) and not obs.blank:     # a blank frame observes no motion
-            init = self.bodies.previous_labels(win_ids) if n_req > 0 else None
-            motions, rescan = None, None
-            method = self.params['method']
-            if method == 'general' and fill < min(GENERAL_MIN_FRAMES, self.params['window']):
-                method = 'robust'
-            if init is not None:
-                init = np.where(init < n_req, init, -1)
-                if method == 'general' and self._motions:
-                    motions = (np.full((n_req, 3), np.nan), np.full((n_req, 3), np.nan))
-                    for body, (w_b, t_b) in self._motions.items():
-                        if body < n_req:
-                            motions[0][body], motions[1][body] = w_b, t_b
-                    if RESCAN_EVERY_BODY:
-                        rescan = list(range(n_req))
-                    else:
-                        rescan = [self._rescan % n_req]
-                        self._rescan = (self._rescan + 1) % n_req
-            warm_inliers = None
-            # 'robust' only: 'general' (and its first frames, answered by 'robust') keeps the
-            # rotation-only step as tuned (see segment_lines' warm_competes)
-            if (init is not None and self.params['method'] == 'robust'
-                    and self._warm_floor is not None):
-                floor, left = self._warm_floor
-                warm_inliers = min(floor, ROBUST_WARM_INLIERS)
-                self._warm_floor = (floor, left - 1) if left > 1 else None
-            try:
-                res = segment_lines(win_tracks, n_req, intrinsics=intrinsics, image_size=size,
-                                    method=method, seed=int(self.params['seed']),
-                                    init_labels=init, init_motions=motions, rescan=rescan,
-                                    warm_inliers=warm_inliers,
-                                    warm_competes=self.params['method'] == 'robust')
-                if res.info.get('warm_rejected'):
-                    self._warm_floor = (max(res.info['inlier_share'] - WARM_FLOOR_MARGIN, 0.0),
-                                        WARM_FLOOR_SOLVES)
-            except (ValueError, NotImplementedError) as exc:
-                problems.append(f'solver: {exc}')
-            except Exception as exc:  # noqa: B902 (a solver failure must not lose the frame)
-                problems.append(f'solver failed: {type(exc).__name__}: {exc}')
-        elif fill >= 2 and not obs.blank:
-            problems.append('no line tracks in the window')
+        res = self._segment(obs, problems)
         timings['solve'] = (time.perf_counter() - t) * 1e3
-
-        if res is not None:
-            published = np.asarray(res.angular_velocities, dtype=float).reshape(-1, 3)
-            # 'general' publishes a refit of each body's rotation; body ids and the warm start
-            # follow the motions the labels were made with
-            segmented = np.asarray(res.info.get('segmentation_angular_velocities', published),
-                                   dtype=float).reshape(-1, 3)
-            omega = segmented / interval
-            published = published / interval
-            cov = np.asarray(res.angular_covariances, dtype=float).reshape(-1, 3, 3)
-            cov = cov / interval ** 2
-            lab = np.asarray(res.labels).astype(np.int64)
-            support = np.bincount(lab[lab >= 0], minlength=len(omega))[:len(omega)]
-            valid = (np.all(np.isfinite(omega), axis=1)
-                     & np.all(np.isfinite(cov.reshape(len(cov), -1)), axis=1)
-                     & (support >= MIN_BODY_TRACKS))
-            mid = None
-            if self.bodies.n_slots == 0:      # positions only order the bodies of a first window
-                tracks = np.asarray(win_tracks, dtype=float)
-                with np.errstate(invalid='ignore'):
-                    mid = np.nanmean(0.5 * (tracks[..., :2] + tracks[..., 2:]), axis=1)
-            mapping = self.bodies.update(win_ids, res.labels, omega, valid, positions=mid)
-            n_out = max(self.n_bodies, int(mapping.max()) + 1 if mapping.size else 0)
-            w_out, c_out, v_out = _invalid_bodies(n_out)
-            w_out[mapping] = published
-            c_out[mapping] = cov
-            v_out[mapping] = valid
-            t_dirs = res.info.get('translation_directions')
-            if t_dirs is not None:
-                for j in np.flatnonzero(valid):                  # bodies, not lines
-                    self._motions[int(mapping[j])] = (segmented[j], np.asarray(t_dirs[j]))
-            stable = relabel(res.labels, mapping)
-            labels = _lookup(track_ids, win_ids, stable.astype(np.int32), -1).astype(np.int32)
-            memory = int(self.params['label_memory'])
-            if memory > 0:
-                old = self.bodies.previous_labels(track_ids, max_age=memory)
-                carried = (labels < 0) & (old >= 0)
-                labels = np.where(carried, old, labels).astype(np.int32)
-            residuals = _lookup(track_ids, win_ids,
-                                np.asarray(res.residuals, dtype=np.float32), np.nan)
-            focal = float(res.focal_length)
-            # not from an image of another size than the tracker's now: solved late (the
-            # node's solver worker) it would fix f for the new size
-            if (intrinsics is None and math.isfinite(focal) and focal > 0
-                    and size == self._image_size):
-                self._focal_samples.append(focal)
-                if len(self._focal_samples) >= FOCAL_SAMPLES:
-                    self._focal_fixed = float(np.median(self._focal_samples))
-        else:
-            w_out, c_out, v_out = _invalid_bodies(self.n_bodies)
-        if intrinsics is None and math.isfinite(focal) and focal > 0:
-            intrinsics = (focal, focal, size[0] / 2.0, size[1] / 2.0)     # as the solver's
-        rays = segment_rays(segments if obs.undistorted is None else obs.undistorted,
-                            intrinsics)
+        out = self._unsolved(obs) if res is None else self._publish(obs, res)
+        rays = segment_rays(obs.segments if obs.undistorted is None else obs.undistorted,
+                            self._ray_intrinsics(obs, out.get('focal_length', math.nan)))
         timings['total'] = obs.elapsed_ms + (time.perf_counter() - t0) * 1e3
         return FrameResult(
-            stamp=stamp, segments=segments, track_ids=track_ids, labels=labels,
-            residuals=residuals.astype(np.float32), angular_velocities=w_out,
-            angular_covariances=c_out, body_valid=v_out, timings=timings, window_fill=fill,
-            problem='; '.join(problems) or None, focal_length=focal, frame_interval=interval,
-            n_tracks=int(len(win_ids)), carried=carried, rays=rays)
+            stamp=obs.stamp, segments=obs.segments, track_ids=obs.track_ids,
+            timings=timings, window_fill=obs.window_fill, problem='; '.join(problems) or None,
+            frame_interval=obs.frame_interval, n_tracks=int(len(obs.win_ids)), rays=rays,
+            **out)
+
+    @staticmethod
+    def _ray_intrinsics(obs: Observation, focal: float
+                        ) -> Optional[Tuple[float, float, float, float]]:
+        """Return the frame's intrinsics, else the solver's estimate; None while f is unknown."""
+        if obs.intrinsics is not None:
+            return obs.intrinsics
+        if math.isfinite(focal) and focal > 0:     # as the solver's: the image centre
+            return (focal, focal, obs.image_size[0] / 2.0, obs.image_size[1] / 2.0)
+        return None
+
+    def _apply_resets(self, resets: FrozenSet[str]) -> None:
+        """Reset the solve side as an observation asks (see :attr:`Observation.resets`)."""
+        if 'tracks' in resets:
+            self.bodies.forget_tracks()     # the tracker restarted and may reuse track ids
+        if 'bodies' in resets:
+            self.bodies.reset()
+            self._warm.reset()
+        if 'focal' in resets:
+            self._forget_focal()
+
+    def _segment(self, obs: Observation, problems: List[str]) -> Optional[SegmentationResult]:
+        """Run the solver on the window of ``obs``; None (and why in ``problems``) if it did not.
+
+        The ``method`` parameter's method, or its stand-in while the window holds too few
+        frames, warm-started from the previous solves.
+        """
+        if obs.window_fill < 2 or obs.blank:           # a blank frame observes no motion
+            return None
+        if not len(obs.win_ids):
+            problems.append('no line tracks in the window')
+            return None
+        n_req = int(self.params['num_bodies'])
+        method = get_method(self.params['method']).for_window(obs.window_fill,
+                                                              int(self.params['window']))
+        previous = self.bodies.previous_labels(obs.win_ids) if n_req > 0 else None
+        try:
+            res = segment_lines(obs.win_tracks, n_req, intrinsics=obs.intrinsics,
+                                image_size=obs.image_size, method=method.name,
+                                seed=int(self.params['seed']),
+                                **self._warm.keywords(method, previous, n_req))
+        except (ValueError, NotImplementedError) as exc:
+            problems.append(f'solver: {exc}')
+            return None
+        except Exception as exc:  # noqa: B902 (a solver failure must not lose the frame)
+            problems.append(f'solver failed: {type(exc).__name__}: {exc}')
+            return None
+        self._warm.solved(method, res)
+        return res
+
+    def _unsolved(self, obs: Observation) -> Dict[str, Any]:
+        """Return the per-segment and per-body fields of a frame that was not solved."""
+        m = len(obs.segments)
+        w, c, v = _invalid_bodies(self.n_bodies)
+        return {'labels': np.full(m, -1, dtype=np.int32),
+                'residuals': np.full(m, np.nan, np.float32), 'angular_velocities': w,
+                'angular_covariances': c, 'body_valid': v, 'carried': np.zeros(m, dtype=bool)}
+
+    def _publish(self, obs: Observation, res: SegmentationResult) -> Dict[str, Any]:
+        """Return the per-segment and per-body fields of a solved frame, by stable body id.
+
+        Rotations in rad/s (the window's median frame interval); the body ids follow the
+        motions the labels were made with (``segmentation_angular_velocities``), the published
+        ones may be a refit of them.
+        """
+        interval = obs.frame_interval
+        published = np.asarray(res.angular_velocities, dtype=float).reshape(-1, 3) / interval
+        omega = (np.asarray(res.segmentation_angular_velocities, dtype=float).reshape(-1, 3)
+                 / interval)
+        cov = np.asarray(res.angular_covariances, dtype=float).reshape(-1, 3, 3) / interval ** 2
+        lab = np.asarray(res.labels).astype(np.int64)
+        support = np.bincount(lab[lab >= 0], minlength=len(omega))[:len(omega)]
+        valid = (np.all(np.isfinite(omega), axis=1)
+                 & np.all(np.isfinite(cov.reshape(len(cov), -1)), axis=1)
+                 & (support >= MIN_BODY_TRACKS))
+        mid = None
+        if self.bodies.n_slots == 0:      # positions only order the bodies of a first window
+            with np.errstate(invalid='ignore'):
+                mid = np.nanmean(0.5 * (obs.win_tracks[..., :2] + obs.win_tracks[..., 2:]),
+                                 axis=1)
+        mapping = self.bodies.update(obs.win_ids, res.labels, omega, valid, positions=mid)
+        n_out = max(self.n_bodies, int(mapping.max()) + 1 if mapping.size else 0)
+        w_out, c_out, v_out = _invalid_bodies(n_out)
+        w_out[mapping] = published
+        c_out[mapping] = cov
+        v_out[mapping] = valid
+        self._warm.remember(res, mapping, valid)
+        labels, carried = self._segment_labels(obs, res.labels, mapping)
+        self._sample_focal(obs, float(res.focal_length))
+        residuals = _lookup(obs.track_ids, obs.win_ids,
+                            np.asarray(res.residuals, dtype=np.float32), np.nan)
+        return {'labels': labels, 'residuals': residuals.astype(np.float32),
+                'angular_velocities': w_out, 'angular_covariances': c_out, 'body_valid': v_out,
+                'carried': carried, 'focal_length': float(res.focal_length)}
+
+    def _segment_labels(self, obs: Observation, labels: np.ndarray, mapping: np.ndarray
+                        ) -> Tuple[np.ndarray, np.ndarray]:
+        """Stable body id of every segment of the frame, and where it was carried over.
+
+        A segment whose track the solve left unassigned keeps the id it was last assigned for
+        up to ``label_memory`` frames.
+        """
+        stable = relabel(labels, mapping)
+        out = _lookup(obs.track_ids, obs.win_ids, stable.astype(np.int32), -1).astype(np.int32)
+        carried = np.zeros(len(out), dtype=bool)
+        memory = int(self.params['label_memory'])
+        if memory > 0:
+            old = self.bodies.previous_labels(obs.track_ids, max_age=memory)
+            carried = (out < 0) & (old >= 0)
+            out = np.where(carried, old, out).astype(np.int32)
+        return out, carried
+
+    def _sample_focal(self, obs: Observation, focal: float) -> None:
+        """Collect an estimated focal length; fix the median of :data:`FOCAL_SAMPLES` of them."""
+        # not from an image of another size than the tracker's now: solved late (the node's
+        # solver worker) it would fix f for the new size
+        if (obs.intrinsics is None and math.isfinite(focal) and focal > 0
+                and obs.image_size == self._image_size):
+            self._focal_samples.append(focal)
+            if len(self._focal_samples) >= FOCAL_SAMPLES:
+                self._focal_fixed = float(np.median(self._focal_samples))

@@ -78,41 +78,31 @@ def test_general_diagnostics_plumbing() -> None:
                                     max_uses=hopkins_runs.MAX_USES)
     res = segment_lines(tracks, seq.n_motions, image_size=seq.image_size, method='general',
                         seed=3)
-    assert np.isfinite(res.info['score'])
+    assert np.isfinite(res.diagnostics.score)
     own = hopkins_runs._general_diagnostics(tracks, res.labels, seq, res, 3)
     assert own['truth_cheaper'] == 0.0
     truth = hopkins_runs._general_diagnostics(tracks, labels, seq, res, 3)
     assert truth['truth_cheaper'] in (0.0, 1.0) and 0.0 <= truth['truth_start_miscl'] <= 1.0
 
 
-def test_warm_path_keeps_a_right_grouping_on_a_real_stream(monkeypatch) -> None:
+def test_warm_path_keeps_a_right_grouping_on_a_real_stream() -> None:
     # 1R2TCR, lines from frame 0, K = 5 windows sliding by one frame through the pipeline's
     # warm path (Pipeline.process_lines, as the node solves them): the first window is right;
-    # reassigning every track by the fitted-direction costs at the previous motions gave two
-    # bodies' lines to one in the sixth window (33% wrong); keeping the previous labels does
-    # not
+    # reassigning every track by the fitted-direction costs at the previous motions alone gave
+    # two bodies' lines to one in the sixth window (33% wrong); the start from the previous
+    # labels keeps them
     from mlofc_tools.bench import hopkins_stream
-    from mlofc_ros.solver import core
-    for name in ('WARM_KEEP_LABELS', 'WARM_ALSO_REASSIGNED'):     # restored afterwards
-        monkeypatch.setattr(core, name, getattr(core, name))
-    variant = next(v for v, s in hopkins_stream.VARIANT_SETTINGS.items()
-                   if s == (core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED))   # the default
-    rec = hopkins_stream.stream_sequence(str(DATA / '1R2TCR.npz'), variant, windows=6,
-                                         cold=False)
+    rec = hopkins_stream.stream_sequence(str(DATA / '1R2TCR.npz'), windows=6, cold=False)
     assert rec['stream'][0] == 0.0 and len(rec['stream']) == 6
     assert max(rec['stream']) <= 0.03
 
 
 def test_quick_stream_benchmark(tmp_path: pathlib.Path) -> None:
     from mlofc_tools.bench import hopkins_stream
-    from mlofc_ros.solver import core
-    defaults = core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED
     assert hopkins_stream.parse_args([]).motions is None
     with pytest.raises(SystemExit):
-        hopkins_stream.parse_args(['--variants', 'kept,nope'])
-    assert hopkins_stream.main(['--quick', '--variants', 'both,reassigned', '--out',
-                                str(tmp_path)]) == 0
+        hopkins_stream.parse_args(['--variants', 'both'])        # no variants any more
+    assert hopkins_stream.main(['--quick', '--out', str(tmp_path)]) == 0
     text = (tmp_path / 'README.md').read_text()
-    assert '| 3 | 1 | both |' in text and '| 3 | 1 | reassigned |' in text
+    assert '| 3 | 1 |' in text
     assert '| three-cars | 3 | 15 |' in text
-    assert (core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED) == defaults   # restored

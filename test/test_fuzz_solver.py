@@ -26,8 +26,9 @@ import warnings
 from hypothesis import given, HealthCheck, settings, strategies as st
 from hypothesis.extra import numpy as hnp
 import numpy as np
+import pytest
 
-from mlofc_ros.solver import METHODS, segment_lines
+from mlofc_ros.solver import get_method, METHODS, segment_lines
 
 CHEAP_METHODS = [m for m in METHODS if m != 'general']
 FUZZ = {'deadline': None, 'database': None, 'print_blob': True,
@@ -304,8 +305,12 @@ def test_edge_floats_anywhere(tracks, n_bodies, intr, size, method):
     check(tracks, n_bodies, intr, size, method)
 
 
-def test_init_labels_of_the_wrong_length_are_a_value_error():
+@pytest.mark.parametrize('method', [m for m in METHODS if get_method(m).accepts('init_labels')])
+def test_init_labels_of_the_wrong_length_are_a_value_error(method):
     tracks = scene(np.random.default_rng(0), 6, 3, 2, 3.0, False)
+    intr = (500.0, 500.0, 320.0, 240.0)
+    right = segment_lines(tracks, 1, intr, SIZE, method, init_labels=np.zeros(6, np.int64))
+    assert right.labels.shape == (6,)
     for labels in (np.zeros(1, np.int64), np.zeros(7, np.int64), np.zeros((6, 2), np.int64)):
-        for method in ('robust', 'algebraic', 'kmeans'):
-            check(tracks, 1, (500.0, 500.0, 320.0, 240.0), SIZE, method, 0, labels)
+        with pytest.raises(ValueError, match=r'init_labels must have shape \(6,\)'):
+            segment_lines(tracks, 1, intr, SIZE, method, init_labels=labels)

@@ -13,6 +13,7 @@
 # limitations under the License.
 
 """Pipeline (no ROS) on rendered sequences: accuracy, stamps, bad input, reconfiguration, ids."""
+import dataclasses
 import functools
 import itertools
 import math
@@ -582,7 +583,7 @@ def test_estimated_focal_length_is_fixed_after_warm_up():
     assert focal[-2] == held                        # fixed: no longer re-estimated
     assert abs(held - seq.camera.fx) / seq.camera.fx < 0.1
     p.reset()
-    assert p._intrinsics(None, (320, 240)) == (None, None)      # forgotten on reset
+    assert p.observe(seq.frames[0], seq.stamps[0]).intrinsics is None    # forgotten on reset
 
 
 def test_a_focal_length_estimated_before_a_size_change_is_not_kept():
@@ -591,18 +592,21 @@ def test_a_focal_length_estimated_before_a_size_change_is_not_kept():
     seq = render_sequence(n_boxes=2, n_frames=22, size=(320, 240), motion='camera_centre',
                           background=True, noise_sigma=1.0, seed=3)
     p = Pipeline(num_bodies=3, window=4)
-    i = 0
-    while len(p._focal_samples) < FOCAL_SAMPLES - 1:
-        p.process(seq.frames[i], seq.stamps[i])
+    i = samples = 0
+    while samples < FOCAL_SAMPLES - 1:                            # one estimate short
+        samples += math.isfinite(p.process(seq.frames[i], seq.stamps[i]).focal_length)
         i += 1
     old = p.observe(seq.frames[i], seq.stamps[i])                 # solved late, below
-    cropped = [np.ascontiguousarray(f[:220, :300]) for f in seq.frames[i + 1:i + 3]]
+    cropped = [np.ascontiguousarray(f[:220, :300]) for f in seq.frames[i + 1:i + 4]]
     first_new = p.observe(cropped[0], seq.stamps[i + 1])
     assert 'size changed' in first_new.problems[0] and first_new.intrinsics is None
-    p.solve(old)
-    assert p.observe(cropped[1], seq.stamps[i + 2]).intrinsics is None
+    assert math.isfinite(p.solve(old).focal_length)               # estimated, not kept
+    second = p.observe(cropped[1], seq.stamps[i + 2])
+    assert second.intrinsics is None
     p.solve(first_new.replacing(old))
-    assert not p._focal_samples and p._focal_fixed is None
+    # the old size's estimates are forgotten: one of the new size does not fix f
+    assert math.isfinite(p.solve(second).focal_length)
+    assert p.observe(cropped[2], seq.stamps[i + 3]).intrinsics is None
 
 
 def test_labels_are_stable_over_time():
@@ -624,56 +628,53 @@ def test_labels_are_stable_over_time():
 
 def test_general_rescans_every_tracked_body_at_every_warm_solve(monkeypatch):
     # a body tracked in a wrong basin keeps it through the warm starts unless its fit is
-    # searched again: the pipeline asks for every body at every warm solve (RESCAN_EVERY_BODY)
+    # searched again: the pipeline asks for every body at every warm solve
     import mlofc_ros.pipeline as pipeline_module
     seq = small_sequence()
     asked = []
 
     def spy(*args, **kwargs):
-        asked.append(kwargs.get('rescan'))
+        asked.append(kwargs)
         return segment_lines(*args, **kwargs)
     monkeypatch.setattr(pipeline_module, 'segment_lines', spy)
-
-    def warm_rescans():
-        # the rescan sets a fresh 'general' pipeline asks for over six frames (warm solves)
-        asked.clear()
-        p = Pipeline(num_bodies=2, window=3, method='general')
-        for img, t in zip(seq.frames[:6], seq.stamps[:6]):
-            p.process(img, t, seq.camera)
-        return [r for r in asked if r is not None]
-    warm = warm_rescans()
-    assert len(warm) >= 3 and all(r == [0, 1] for r in warm)
-    # the former schedule, one body per solve in turn, stays available
-    monkeypatch.setattr(pipeline_module, 'RESCAN_EVERY_BODY', False)
-    warm = warm_rescans()
-    assert len(warm) >= 3 and warm == [[i % 2] for i in range(len(warm))]
+    p = Pipeline(num_bodies=2, window=3, method='general')
+    for img, t in zip(seq.frames[:6], seq.stamps[:6]):
+        p.process(img, t, seq.camera)
+    warm = [kw for kw in asked if 'init_motions' in kw]
+    assert len(warm) >= 3 and all(kw['rescan'] == [0, 1] for kw in warm)
+    assert all('rescan' not in kw for kw in asked if 'init_motions' not in kw)
     asked.clear()
     run(Pipeline(num_bodies=2, window=3), seq)                    # 'robust': nothing to rescan
-    assert asked and all(r is None for r in asked)
+    assert asked and not any('rescan' in kw or 'init_motions' in kw for kw in asked)
+    assert any('init_labels' in kw for kw in asked)
 
 
 def test_general_starts_once_the_window_holds_enough_frames(monkeypatch):
     # a cold 'general' search on 2-4 frames decides a grouping the warm starts keep: until the
-    # window holds GENERAL_MIN_FRAMES (or all of a shorter window) the rotation-only solve answers
+    # window holds the method's min_frames (or all of a shorter window) its rotation-only step
+    # answers, as it runs inside the method (the warm start not competing)
     import mlofc_ros.pipeline as pipeline_module
+    from mlofc_ros.solver import get_method
     seq = small_sequence()
-    methods = []
+    calls = []
 
     def spy(*args, **kwargs):
-        methods.append(kwargs['method'])
+        calls.append(kwargs)
         return segment_lines(*args, **kwargs)
     monkeypatch.setattr(pipeline_module, 'segment_lines', spy)
-    first = pipeline_module.GENERAL_MIN_FRAMES
+    first = get_method('general').min_frames
     p = Pipeline(num_bodies=2, window=first + 1, method='general')
     for img, t in zip(seq.frames[:first + 2], seq.stamps[:first + 2]):
         p.process(img, t, seq.camera)
     # frame 0 has no flow; frames 1 .. first-2 hold 2 .. first-1 frames
-    assert methods == ['robust'] * (first - 2) + ['general'] * 3
-    methods.clear()
+    assert [kw['method'] for kw in calls] == ['robust'] * (first - 2) + ['general'] * 3
+    assert all(kw['warm_competes'] is False and 'warm_inliers' not in kw
+               for kw in calls[:first - 2])
+    calls.clear()
     p = Pipeline(num_bodies=2, window=3, method='general')        # a shorter window: from 3
     for img, t in zip(seq.frames[:4], seq.stamps[:4]):
         p.process(img, t, seq.camera)
-    assert methods == ['robust', 'general', 'general']
+    assert [kw['method'] for kw in calls] == ['robust', 'general', 'general']
 
 
 def test_after_a_search_the_warm_start_needs_only_what_the_search_kept(monkeypatch):
@@ -681,23 +682,29 @@ def test_after_a_search_the_warm_start_needs_only_what_the_search_kept(monkeypat
     # 75% inliers) and the search kept 0.62; the next WARM_FLOOR_SOLVES solves accept a warm
     # start keeping 0.57, then the default holds again until the next search
     import mlofc_ros.pipeline as pipeline_module
-    seq = small_sequence(12)
-    asked = []
+    solves = pipeline_module.WARM_FLOOR_SOLVES
+    seq = small_sequence(solves + 6)
+    asked, rejected = [], {3, solves + 5}        # the third solve's search, and the last's
 
     def spy(*args, **kwargs):
         asked.append(kwargs.get('warm_inliers'))
         res = segment_lines(*args, **kwargs)
-        res.info.update(warm_rejected=len(asked) == 3, inlier_share=0.62)
+        res.diagnostics = dataclasses.replace(
+            res.diagnostics, warm_rejected=len(asked) in rejected, inlier_share=0.62)
         return res
     monkeypatch.setattr(pipeline_module, 'segment_lines', spy)
-    monkeypatch.setattr(pipeline_module, 'WARM_FLOOR_SOLVES', 4)
     p = Pipeline(num_bodies=2, window=3)
     for img, t in zip(seq.frames, seq.stamps):
         p.process(img, t, seq.camera)
-    assert asked[:3] == [None] * 3 and asked[7:] == [None] * 4
-    np.testing.assert_allclose(asked[3:7], 0.62 - pipeline_module.WARM_FLOOR_MARGIN)
-    p.reset()                                       # forgotten with the bodies
-    assert p._warm_floor is None
+    assert len(asked) == solves + 5
+    assert asked[:3] == [None] * 3 and asked[3 + solves:] == [None] * 2
+    np.testing.assert_allclose(asked[3:3 + solves], 0.62 - pipeline_module.WARM_FLOOR_MARGIN)
+    # the last solve lowered the bar again; a reset forgets it with the bodies
+    p.reset()
+    asked.clear()
+    for img, t in zip(seq.frames[:4], seq.stamps[:4]):
+        p.process(img, t, seq.camera)
+    assert len(asked) == 3 and asked == [None] * 3
 
 
 # --- line tracks from the caller's own tracker (observe_lines / process_lines) ---------------

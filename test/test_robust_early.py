@@ -14,10 +14,10 @@
 """Early accept of the robust solver's first start, and its fallback to the full search."""
 import numpy as np
 
-from mlofc_tools.bench.common import best_permutation
 from mlofc_ros.solver import robust, segment_lines
 from mlofc_ros.solver.lines import line_flows
 from mlofc_ros.solver.models import fit_bodies, track_costs, track_stats
+from mlofc_tools.scoring import best_permutation
 from mlofc_tools.synthetic import make_scene
 
 
@@ -30,23 +30,26 @@ def _wrong(labels, truth):
 
 
 def test_a_clear_first_start_is_accepted_alone_with_the_full_search_result(monkeypatch):
-    for seed in range(3):
-        sc = _scene(seed)
-        early = segment_lines(sc.tracks, 3, intrinsics=sc.intrinsics, seed=0)
-        assert early.info.get('early_accept') and early.info['candidate'] == 'gpca-weighted'
-        monkeypatch.setattr(robust, 'EARLY_ACCEPT', False)
+    scenes = [_scene(seed) for seed in range(3)]
+    early = [segment_lines(sc.tracks, 3, intrinsics=sc.intrinsics, seed=0) for sc in scenes]
+    # the full search, as when the test has no reference noise to decide with
+    monkeypatch.setattr(robust, 'early_stats', lambda *args, **kwargs: None)
+    for sc, res in zip(scenes, early):
+        assert res.diagnostics.early_accept
+        assert res.diagnostics.candidate == 'gpca-weighted'
+        assert not res.diagnostics.candidate_costs            # no other start was scored
         full = segment_lines(sc.tracks, 3, intrinsics=sc.intrinsics, seed=0)
-        monkeypatch.setattr(robust, 'EARLY_ACCEPT', True)
-        assert 'early_accept' not in full.info
-        assert np.array_equal(early.labels, full.labels)
-        assert np.allclose(early.angular_velocities, full.angular_velocities, atol=1e-12)
+        assert not full.diagnostics.early_accept
+        assert len(full.diagnostics.candidate_costs) == 3
+        assert np.array_equal(res.labels, full.labels)
+        assert np.allclose(res.angular_velocities, full.angular_velocities, atol=1e-12)
 
 
 def test_two_frames_have_no_reference_noise_and_search_everything():
     sc = _scene(0, k=2)
     res = segment_lines(sc.tracks, 3, intrinsics=sc.intrinsics, seed=0)
-    assert 'early_accept' not in res.info
-    assert len(res.info['candidate_costs']) == 3
+    assert not res.diagnostics.early_accept
+    assert len(res.diagnostics.candidate_costs) == 3
 
 
 def test_the_test_rejects_a_merged_and_split_grouping():
@@ -86,7 +89,7 @@ def test_a_wrong_first_start_falls_back_to_the_full_search(monkeypatch):
 
     monkeypatch.setattr(robust, 'ksubspaces', first_wrong)
     res = segment_lines(sc.tracks, 3, intrinsics=sc.intrinsics, seed=0)
-    assert 'early_accept' not in res.info
-    assert len(res.info['candidate_costs']) == 3             # every start, the wrong one too
-    assert res.info['candidate'] != 'gpca-weighted'
+    assert not res.diagnostics.early_accept
+    assert len(res.diagnostics.candidate_costs) == 3         # every start, the wrong one too
+    assert res.diagnostics.candidate != 'gpca-weighted'
     assert _wrong(res.labels, sc.labels) < 0.03

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from scenes import random_scene
 
-from mlofc_ros.solver import assign_with_motions, METHODS, segment_lines
+from mlofc_ros.solver import assign_with_motions, get_method, METHODS, segment_lines, WarmStart
 from mlofc_ros.solver.lines import rotation_matrix
 
 
@@ -85,7 +85,7 @@ def test_floor_and_noise_weighting():
     floor = assign_with_motions(tracks, omegas, intr)
     assert floor.labels.shape == labels.shape
     res = segment_lines(tracks, 2, intrinsics=intr)
-    assert 0.3 < res.info['sigma_px'] < 3.0       # the endpoint noise is estimated
+    assert 0.3 < res.diagnostics.sigma_px < 3.0       # the endpoint noise is estimated
 
 
 def test_outlier_tracks_get_minus_one():
@@ -124,6 +124,24 @@ GOOD = random_scene(2, 10, seed=9)
     ({'n_bodies': 4, 'method': 'algebraic', 'tracks': GOOD[0][:6]}, 'usable tracks'),
     ({'n_bodies': 2, 'tracks': np.full((30, 3, 4), np.nan)}, 'usable tracks'),
     ({'tracks': np.where(np.arange(4) < 2, np.inf, 1.0) * np.ones((20, 2, 4))}, 'infinite'),
+    ({'method': 'algebraic', 'init_labels': np.zeros(20, int)},
+     r"method 'algebraic' does not take init_labels \(it takes none of them\)"),
+    ({'method': 'kmeans', 'warm_inliers': 0.5}, "'kmeans' does not take warm_inliers"),
+    ({'init_motions': (np.zeros((2, 3)), np.zeros((2, 3)))},
+     r"'robust' does not take init_motions \(it takes init_labels, warm_competes, "
+     r'warm_inliers\)'),
+    ({'method': 'general', 'warm_competes': False}, "'general' does not take warm_competes"),
+    ({'method': 'general', 'warm_inliers': 0.5}, "'general' does not take warm_inliers"),
+    ({'n_bodies': 0, 'init_labels': np.zeros(20, int)}, 'init_labels need n_bodies >= 1'),
+    ({'init_labels': np.zeros(19, int)}, r'init_labels must have shape \(20,\)'),
+    ({'init_labels': np.zeros(20)}, 'init_labels must be integers'),
+    ({'method': 'general', 'init_motions': (np.zeros((2, 3)), np.zeros((2, 3)))},
+     'init_motions need init_labels'),
+    ({'method': 'general', 'init_labels': np.zeros(20, int), 'rescan': [0]},
+     'rescan needs init_motions'),
+    ({'method': 'general', 'init_labels': np.zeros(20, int),
+      'init_motions': (np.zeros((2, 3)), np.zeros((2, 3))), 'rescan': [2]},
+     r'rescan must name bodies in \[0, 2\)'),
 ])
 def test_bad_input_raises_a_named_value_error(kwargs, match):
     args = {'tracks': GOOD[0], 'n_bodies': 2, 'intrinsics': GOOD[3]}
@@ -138,7 +156,7 @@ def test_number_of_bodies_is_chosen(n):
     res = segment_lines(tracks, 0, intrinsics=intr)
     assert res.n_bodies == n
     assert misclassified(res.labels, labels, n) < 0.05
-    assert set(res.info['n_bodies_scores']) >= {1, 2}
+    assert set(res.diagnostics.n_bodies_scores) >= {1, 2}
 
 
 def test_multi_frame_beats_two_frames():
@@ -163,3 +181,42 @@ def test_stitched_outlier_tracks_do_not_move_the_bodies(n_frames):
     assert misclassified(res.labels[:len(tracks)], labels, 3) <= 0.03
     assert np.mean(res.labels[len(tracks):] == -1) >= 0.8
     assert matched_rotation_error(res.angular_velocities, omegas) < 0.15
+
+
+def test_every_method_declares_what_its_callers_need():
+    assert METHODS == ('algebraic', 'kmeans', 'algebraic+kmeans', 'robust', 'general')
+    for name in METHODS:
+        method = get_method(name)
+        assert method.name == name and method.keywords <= {
+            'init_labels', 'init_motions', 'rescan', 'warm_inliers', 'warm_competes'}
+        # a method takes the previous window's labels exactly when it has a warm start
+        assert ('init_labels' in method.keywords) == (method.warm_start is not WarmStart.NONE)
+        assert ('init_motions' in method.keywords) == (method.warm_start is WarmStart.MOTIONS)
+        assert ('rescan' in method.keywords) == method.rescans
+    general = get_method('general')
+    assert general.slow and general.min_frames == 5
+    # before five frames (or a shorter window's all), the rotation-only step answers
+    assert general.for_window(4, 10).name == 'robust' and general.for_window(5, 10) is general
+    assert general.for_window(3, 3) is general
+    stand_in = general.for_window(2, 10)
+    assert not stand_in.slow and stand_in.warm_start is WarmStart.LABELS
+    assert stand_in.accepts('init_labels') and not stand_in.accepts('warm_inliers')
+    assert not stand_in.accepts('warm_competes') and stand_in.fixed == {'warm_competes': False}
+    robust = get_method('robust')
+    assert robust.for_window(2, 10) is robust and robust.accepts('warm_inliers')
+    with pytest.raises(ValueError, match='unknown method'):
+        get_method('magic')
+
+
+def test_the_stand_in_is_the_rotation_only_step_of_general():
+    # 'general' on two frames answers with its rotation-only step: the stand-in's solve
+    tracks, labels, omegas, intr = random_scene(2, 12, n_frames=2, seed=2)
+    init = labels.copy()
+    init[::5] = -1
+    stand_in = get_method('general').for_window(2, 10)
+    a = segment_lines(tracks, 2, intrinsics=intr, method=stand_in.name, init_labels=init,
+                      **stand_in.fixed)
+    b = segment_lines(tracks, 2, intrinsics=intr, method='general', init_labels=init)
+    np.testing.assert_array_equal(a.labels, b.labels)
+    np.testing.assert_array_equal(a.angular_velocities, b.angular_velocities)
+    assert b.method == 'general' and a.method == 'robust'

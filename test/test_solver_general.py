@@ -139,7 +139,8 @@ def test_fit_body_recovers_rotation_and_translation_direction():
 def test_two_frames_fall_back_to_rotation_only():
     tracks, labels, omegas, intr = random_scene(2, 12, n_frames=2, seed=2)
     res = segment_lines(tracks, 2, intrinsics=intr, method='general')
-    assert res.method == 'general' and 'fewer than 3 frames' in res.info['general']
+    assert res.method == 'general' and 'fewer than 3 frames' in res.diagnostics.note
+    assert res.translation_directions is None
 
 
 @pytest.mark.slow
@@ -189,7 +190,7 @@ def test_warm_path_does_not_depend_on_how_the_bodies_are_numbered():
         res = segment_lines(tracks, 3, intrinsics=(F, F, C, C), method='general',
                             init_labels=np.where(init >= 0, new_id[init], -1),
                             init_motions=(W0[perm], T0[perm]), rescan=[0, 1, 2])
-        assert res.info['start'] == 'warm'
+        assert res.diagnostics.start == 'warm'
         out.append((np.where(res.labels >= 0, perm[res.labels], -1),
                     np.asarray(res.angular_velocities)[new_id]))
     assert np.array_equal(out[0][0], out[1][0])
@@ -205,30 +206,30 @@ def test_init_motions_are_checked_and_used():
                       init_motions=(np.zeros((2, 3)), np.zeros((2, 3))))
     res = segment_lines(tracks, 1, intrinsics=intr, method='general', init_labels=labels,
                         init_motions=(w[None] * 1.02, t[None]))
-    assert res.info['start'] == 'warm'
+    assert res.diagnostics.start == 'warm'
     assert np.linalg.norm(res.angular_velocities[0] - w) / np.linalg.norm(w) < 1e-2
     # unknown motions (NaN) fall back to the multi-start search
     res = segment_lines(tracks, 1, intrinsics=intr, method='general', init_labels=labels,
                         init_motions=(np.full((1, 3), np.nan), np.full((1, 3), np.nan)))
-    assert res.info['start'] != 'warm'
+    assert res.diagnostics.start != 'warm'
 
 
 def test_warm_path_scores_each_body_as_an_image_blob_too(monkeypatch):
     # the tracked bodies are assigned with the image-position term, like the cold search
-    import mlofc_ros.solver.core as core
+    from mlofc_ros.solver import general_method
     seen = []
 
     def spy(*args, **kwargs):
         seen.append(kwargs)
         return marginal_segmentation(*args, **kwargs)
-    monkeypatch.setattr(core, 'marginal_segmentation', spy)
+    monkeypatch.setattr(general_method, 'marginal_segmentation', spy)
     tracks, w, t = spinning_lines(n_lines=25, seed=5)
     res = segment_lines(tracks, 1, intrinsics=(F, F, C, C), method='general',
                         init_labels=np.zeros(25, dtype=np.int64),
                         init_motions=(w[None] * 1.02, t[None]))
-    assert res.info['start'] == 'warm' and len(seen) == 1
+    assert res.diagnostics.start == 'warm' and len(seen) == 1
     assert seen[0]['points'].shape == (25, 2)
-    assert seen[0]['position_weight'] == core.WARM_POSITION_WEIGHT > 0
+    assert seen[0]['position_weight'] > 0
 
 
 def test_warm_path_sorts_out_stale_labels_and_repairs_a_wrong_grouping():
@@ -248,7 +249,7 @@ def test_warm_path_sorts_out_stale_labels_and_repairs_a_wrong_grouping():
     for init in (stale, swapped):
         res = segment_lines(tracks, 2, intrinsics=(F, F, C, C), method='general',
                             init_labels=init, init_motions=motions)
-        assert res.info['start'] == 'warm'
+        assert res.diagnostics.start == 'warm'
         assert res.labels[3] == 0
         assert np.count_nonzero(res.labels != truth) <= 1   # one line fits both bodies
 
@@ -289,9 +290,9 @@ def test_rescan_lets_a_tracked_body_leave_a_wrong_basin():
                                 init_labels=np.zeros(len(tracks), dtype=np.int64),
                                 init_motions=(w0[None], t0[None] / np.linalg.norm(t0)),
                                 rescan=rescan)
-            assert res.info['start'] == 'warm'
+            assert res.diagnostics.start == 'warm'
             # the motion the labels were made with (the published one is refit from it)
-            seg = res.info['segmentation_angular_velocities'][0]
+            seg = res.segmentation_angular_velocities[0]
             err[rescan is None] = np.linalg.norm(seg - w) / np.linalg.norm(w)
             if rescan is not None:
                 pub = np.linalg.norm(res.angular_velocities[0] - w) / np.linalg.norm(w)
@@ -299,48 +300,51 @@ def test_rescan_lets_a_tracked_body_leave_a_wrong_basin():
         assert err[True] > 0.5 and err[False] < 0.1
 
 
-def test_published_rotation_is_refit_without_changing_the_segmentation(monkeypatch):
-    # the published W is refit at a small fraction of the noise (PUBLISH_NOISE_SCALE); the
-    # labels and the motion they were made with (the warm start's) stay exactly as without
-    from mlofc_ros.solver import core
+def test_published_rotation_is_a_refit_of_the_segmentation_motion():
+    # the published W is refit at a small fraction of the noise (PUBLISH_NOISE_SCALE) from the
+    # motion the labels were made with, which the result keeps beside it
     errors = []
     for seed in (1, 2, 3, 5):                  # small bodies whose fit is in the right basin
         tracks, w = small_spinning_body(seed)
         res = segment_lines(tracks, 1, intrinsics=(F, F, C, C), method='general')
-        with monkeypatch.context() as m:
-            m.setattr(core, 'PUBLISH_NOISE_SCALE', None)
-            plain = segment_lines(tracks, 1, intrinsics=(F, F, C, C), method='general')
-        assert np.array_equal(res.labels, plain.labels)
-        assert np.array_equal(res.info['segmentation_angular_velocities'],
-                              plain.angular_velocities)
-        assert np.array_equal(plain.info['segmentation_angular_velocities'],
-                              plain.angular_velocities)
         assert np.all(np.isfinite(res.angular_covariances))
-        errors.append([np.linalg.norm(r.angular_velocities[0] - w) / np.linalg.norm(w)
-                       for r in (plain, res)])
+        assert res.translation_directions.shape == (1, 3)
+        errors.append([np.linalg.norm(v - w) / np.linalg.norm(w)
+                       for v in (res.segmentation_angular_velocities[0],
+                                 res.angular_velocities[0])])
     seg, pub = np.array(errors).T
     # the direction prior's pull on W (0.3-2.6% of |w| here) mostly gone from the published one
     assert np.all(pub <= seg + 1e-3) and pub.mean() < 0.5 * seg.mean()
-    # a refit that fails publishes the segmentation's motion: a non-finite refit ...
+
+
+def test_a_failed_refit_publishes_the_segmentation_motion(monkeypatch):
+    from mlofc_ros.solver import general_method
+    tracks, w = small_spinning_body(5)
+    res = segment_lines(tracks, 1, intrinsics=(F, F, C, C), method='general')
+    # a non-finite refit ...
     obs = LineObservations(tracks, (F, F, C, C))
-    W, T = plain.angular_velocities, np.array([[0.0, 0.0, 0.1]])
+    W, T = res.segmentation_angular_velocities, np.array([[0.0, 0.0, 0.1]])
     with monkeypatch.context() as m:
-        m.setattr(core, 'polish_body', lambda obs, idx, w, t, *a: (w * np.nan, t, 0.0))
-        W_pub, T_pub = core._published_motions(obs, plain.labels, W, T, 0.01)
+        m.setattr(general_method, 'polish_body', lambda obs, idx, w, t, *a: (w * np.nan, t, 0.0))
+        W_pub, T_pub = general_method.published_motions(obs, res.labels, W, T, 0.01)
     assert np.array_equal(W_pub, W) and np.array_equal(T_pub, T)
-    # ... and one without a covariance (with the covariance at the segmentation's motion)
-    real = core.body_covariance
-    calls = []
+    # ... and one without a covariance (then the covariance at the segmentation's motion)
+    real = general_method.body_covariance
+    calls, returned = [], []
 
     def first_without(*args, **kwargs):
-        calls.append(args[2])
-        return np.full((3, 3), np.nan) if len(calls) == 1 else real(*args, **kwargs)
+        calls.append(np.array(args[2]))                 # a copy: the row is reused
+        returned.append(np.full((3, 3), np.nan) if len(calls) == 1 else real(*args, **kwargs))
+        return returned[-1]
     with monkeypatch.context() as m:
-        m.setattr(core, 'body_covariance', first_without)
+        m.setattr(general_method, 'body_covariance', first_without)
         failed = segment_lines(tracks, 1, intrinsics=(F, F, C, C), method='general')
     assert len(calls) == 2
-    assert np.array_equal(failed.angular_velocities, plain.angular_velocities)
-    assert np.array_equal(failed.angular_covariances, plain.angular_covariances)
+    assert np.array_equal(calls[0], res.angular_velocities[0])       # the refit's
+    assert np.array_equal(calls[1], res.segmentation_angular_velocities[0])
+    assert np.array_equal(failed.angular_velocities, res.segmentation_angular_velocities)
+    assert np.array_equal(failed.angular_covariances[0], returned[1])
+    assert np.all(np.isfinite(failed.angular_covariances))
 
 
 def test_robust_cost_keeps_a_fit_on_the_body_despite_a_few_gross_tracks():

@@ -15,12 +15,12 @@
 import numpy as np
 import pytest
 
-from mlofc_ros.solver.robust import _column_quantile
+from mlofc_ros.solver.robust import column_quantile
 
 
 @pytest.mark.parametrize('rows', [1, 2, 7, 200])
 @pytest.mark.parametrize('q', [0.0, 1.0 / 6.0, 0.25, 0.5, 0.999, 1.0])
-def test_column_quantile_is_numpys(rows, q):
+def testcolumn_quantile_is_numpys(rows, q):
     x = np.random.default_rng(rows).normal(size=(rows, 30))
     x[:, 3] = 1.0                                     # ties
-    assert np.array_equal(_column_quantile(x, q), np.quantile(x, q, axis=0))
+    assert np.array_equal(column_quantile(x, q), np.quantile(x, q, axis=0))

@@ -15,8 +15,8 @@
 import numpy as np
 import pytest
 
-from mlofc_tools.bench.common import best_permutation, motion_errors
 from mlofc_ros.solver import segment_lines
+from mlofc_tools.scoring import best_permutation, motion_errors
 from mlofc_tools.synthetic import make_scene
 
 
@@ -35,7 +35,7 @@ def test_warm_start_from_the_last_window_keeps_the_labels_and_skips_the_search()
         warm = segment_lines(sc.tracks[:, 1:], 3, intrinsics=sc.intrinsics, seed=0,
                              init_labels=cold.labels)
         again = segment_lines(sc.tracks[:, 1:], 3, intrinsics=sc.intrinsics, seed=0)
-        assert warm.info['candidate'] == 'previous'
+        assert warm.diagnostics.candidate == 'previous'
         assert _wrong(warm.labels, sc.labels, 3) <= _wrong(again.labels, sc.labels, 3) + 0.01
         assert _wrong(warm.labels, sc.labels, 3) < 0.03
         perm = best_permutation(warm.labels, sc.labels, 3)[0]
@@ -48,7 +48,7 @@ def test_a_body_missing_from_the_previous_labels_is_searched_for():
     merged = np.where(sc.labels == 2, 1, sc.labels)
     res = segment_lines(sc.tracks[:, 1:], 3, intrinsics=sc.intrinsics, seed=0,
                         init_labels=merged)
-    assert res.info['candidate'] != 'previous' or len(res.info['candidate_costs']) > 1
+    assert res.diagnostics.candidate != 'previous' or len(res.diagnostics.candidate_costs) > 1
     assert _wrong(res.labels, sc.labels, 3) < 0.03
 
 
@@ -71,18 +71,19 @@ def test_warm_inliers_sets_the_share_a_warm_start_keeps_without_a_search():
         init = np.where(body, sc.labels, -1)
         searched = segment_lines(sc.tracks[:, 1:], 2, intrinsics=sc.intrinsics, seed=0,
                                  init_labels=init)
-        assert searched.info['warm_rejected']
-        assert 'previous-pass' in searched.info['candidate_costs']
-        assert 0.7 < searched.info['inlier_share'] < 0.75
+        assert searched.diagnostics.warm_rejected
+        assert 'previous-pass' in searched.diagnostics.candidate_costs
+        assert 0.7 < searched.diagnostics.inlier_share < 0.75
         warm = segment_lines(sc.tracks[:, 1:], 2, intrinsics=sc.intrinsics, seed=0,
                              init_labels=init, warm_inliers=0.6)
-        assert warm.info['candidate'] == 'previous' and 'warm_rejected' not in warm.info
+        assert warm.diagnostics.candidate == 'previous' and not warm.diagnostics.warm_rejected
         np.testing.assert_array_equal(warm.labels[body], sc.labels[body])
         assert np.all(warm.labels[~body] == -1)
         np.testing.assert_array_equal(warm.labels, searched.labels)
     alone = segment_lines(sc.tracks[:, 1:], 2, intrinsics=sc.intrinsics, seed=0,
                           init_labels=init, warm_competes=False)
-    assert alone.info['warm_rejected'] and 'previous-pass' not in alone.info['candidate_costs']
+    assert alone.diagnostics.warm_rejected
+    assert 'previous-pass' not in alone.diagnostics.candidate_costs
     for bad in (-0.1, 1.5, float('nan')):
         with pytest.raises(ValueError, match='warm_inliers'):
             segment_lines(sc.tracks[:, 1:], 2, intrinsics=sc.intrinsics, init_labels=init,

@@ -17,8 +17,9 @@
 >>> res = segment_lines(tracks, 2, intrinsics=(fx, fy, cx, cy))   # doctest: +SKIP
 >>> res.labels, res.angular_velocities                            # doctest: +SKIP
 """
-from .core import assign_with_motions, METHODS, min_tracks_needed, segment_lines
-from .result import SegmentationResult
+from .core import assign_with_motions, min_tracks_needed, segment_lines
+from .methods import get_method, Method, METHODS, WarmStart
+from .result import Diagnostics, SegmentationResult
 
-__all__ = ['assign_with_motions', 'METHODS', 'min_tracks_needed', 'segment_lines',
-           'SegmentationResult']
+__all__ = ['assign_with_motions', 'Diagnostics', 'get_method', 'Method', 'METHODS',
+           'min_tracks_needed', 'segment_lines', 'SegmentationResult', 'WarmStart']

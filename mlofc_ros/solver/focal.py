@@ -24,6 +24,8 @@ gives ``f^2`` (the paper's eq. 18, made precise); the two ratios are pooled by l
 The first-order estimate is then refined exactly: the profile of the Mahalanobis cost of the
 exact known-f model over ``f`` with the labels fixed.
 """
+from functools import lru_cache
+from math import comb
 from typing import Callable, Optional, Tuple
 
 import numpy as np
@@ -31,7 +33,7 @@ import numpy as np
 from .gpca import balance_scale, multibody_vector
 from .lines import line_flows
 from .models import fit_bodies, track_costs
-from .veronese import exponents, monomial_index, relation_space
+from .veronese import embed, exponents, monomial_index
 
 
 def unknown_f_rows_from_normals(m: np.ndarray, e: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -43,6 +45,31 @@ def unknown_f_rows_from_normals(m: np.ndarray, e: np.ndarray, g: np.ndarray) -> 
     ex, ey, ez = e[..., 0], e[..., 1], e[..., 2]
     return np.stack([-b * ex + a * ey, -c * ey, c * ex, b * ez, -a * ez,
                      -np.sum(e * g, axis=-1)], axis=-1)
+
+
+@lru_cache(maxsize=None)
+def relation_space(degree: int) -> np.ndarray:
+    """Orthonormal basis ``(M, q)`` of degree-n polynomials vanishing on every f-unknown row.
+
+    The first five coordinates of the f-unknown row (:func:`unknown_f_rows_from_normals`)
+    depend on three parameters up to scale, so they lie on a hypersurface: for n >= 4 a
+    polynomial in ``y1..y5`` alone vanishes on all rows whatever the motion (checked: rank 125
+    of 126 at n = 4). Found numerically on random rows; ``q = 0`` for n <= 3. Columns index the
+    6-variable embedding of :func:`.veronese.exponents`.
+    """
+    rng = np.random.default_rng(12345)
+    n_rows = 4 * comb(degree + 4, 4)
+    m = rng.normal(size=(n_rows, 3))
+    e = np.cross(m, rng.normal(size=(n_rows, 3)))
+    rows = unknown_f_rows_from_normals(m, e, np.zeros((n_rows, 3)))[:, :5]
+    v = embed(rows / np.linalg.norm(rows, axis=1, keepdims=True), degree)
+    _, s, vt = np.linalg.svd(v)
+    null5 = vt[int(np.sum(s > s[0] * 1e-9)):].T                 # (M5, q)
+    exps6 = exponents(6, degree)
+    out = np.zeros((exps6.shape[0], null5.shape[1]))
+    for k, e5 in enumerate(exponents(5, degree)):               # index map, built once per n
+        out[monomial_index(exps6, tuple(e5) + (0,)), :] = null5[k]
+    return out
 
 
 def first_order_focal(tracks: np.ndarray, n: int, image_size: Tuple[float, float]

@@ -35,7 +35,7 @@ def assign(costs: np.ndarray, threshold: Optional[np.ndarray] = None) -> np.ndar
     return labels
 
 
-def _reseed_empty(labels: np.ndarray, costs: np.ndarray, n: int, min_tracks: int) -> np.ndarray:
+def reseed_empty(labels: np.ndarray, costs: np.ndarray, n: int, min_tracks: int) -> np.ndarray:
     """Give a body that lost its tracks the worst-explained tracks, so no body dies out."""
     counts = np.bincount(labels[labels >= 0], minlength=n)
     if np.all(counts >= min_tracks):
@@ -90,7 +90,7 @@ def ksubspaces(stats: TrackStats, n: int, labels: np.ndarray, max_iter: int = 10
             bound = trim_bound(costs, trim_dof, trim_p, quantiles=trim_q)
         new = assign(costs, bound)
         if threshold is None:
-            new = _reseed_empty(new, costs, n, min_tracks)
+            new = reseed_empty(new, costs, n, min_tracks)
         return c, costs, new
 
     history, seen = [labels], {labels.tobytes(): 0}

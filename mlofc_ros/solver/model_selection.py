@@ -19,11 +19,14 @@ so that an under-fitted model cannot hide behind an inflated noise estimate). Th
 ``3 log(rows)`` per body (three rotation parameters) and ``2 log n`` per track (its label), and
 the smallest score wins: a further body must explain more than it costs to describe.
 """
-from typing import Optional, Sequence, Tuple
+from dataclasses import replace
+from typing import Optional, Tuple
 
 import numpy as np
 
+from .methods import Method
 from .models import chi2_quantile
+from .problem import Problem
 from .result import SegmentationResult
 from .robust import noise_sigma, OUTLIER_P
 
@@ -64,19 +67,22 @@ def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) 
             + 2.0 * usable.sum() * np.log(n))
 
 
-def select_bodies(tracks: np.ndarray, intrinsics: Optional[Tuple[float, ...]],
-                  image_size: Sequence[float], method: str, *, seed: int = 0,
+def select_bodies(tracks: np.ndarray, intrinsics: Optional[Tuple[float, float, float, float]],
+                  image_size: Tuple[float, float], method: Method, *, seed: int = 0,
                   max_bodies: int = MAX_BODIES) -> SegmentationResult:
-    """Run ``method`` for n = 1..max_bodies and return the result with the best score."""
-    from .core import min_tracks_needed, segment_lines
+    """Run ``method`` for n = 1..max_bodies and return the result with the best score.
+
+    ``tracks (N, K, 4)``, ``intrinsics`` and ``image_size`` as checked by
+    :func:`.segment_lines`; every n is solved cold.
+    """
     ok = np.isfinite(tracks[..., 0])
     dof = 2.0 * np.sum(ok[:, :-1] & ok[:, 1:], axis=1)
     usable = int(np.sum(dof > 0))
     results = []
     for n in range(1, max_bodies + 1):
-        if usable < min_tracks_needed(n, tracks.shape[1], method, intrinsics is not None):
+        if usable < method.min_tracks(n, tracks.shape[1], intrinsics is not None):
             break
-        results.append(segment_lines(tracks, n, intrinsics, image_size, method, seed=seed))
+        results.append(method.solve(Problem(tracks, n, intrinsics, image_size, seed)))
     if not results:
         raise ValueError(f'{usable} usable tracks: too few to fit even one body')
     # a body must hold a few lines: with 2 frames, 2 lines (4 equations, 3 unknowns) fit any
@@ -86,5 +92,5 @@ def select_bodies(tracks: np.ndarray, intrinsics: Optional[Tuple[float, ...]],
               if np.all(np.bincount(r.labels[r.labels >= 0], minlength=r.n_bodies) >= min_lines)
               or r.n_bodies == 1 else np.inf for r in results]
     best = results[int(np.argmin(scores))]
-    best.info['n_bodies_scores'] = dict(zip(range(1, len(scores) + 1), scores))
-    return best
+    return replace(best, diagnostics=replace(
+        best.diagnostics, n_bodies_scores=dict(zip(range(1, len(scores) + 1), scores))))

@@ -11,11 +11,81 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The solver's result type."""
+"""The solver's result types: :class:`SegmentationResult` and its :class:`Diagnostics`."""
 from dataclasses import dataclass, field
-from typing import Dict
+import math
+from typing import Dict, Optional, Tuple
 
 import numpy as np
+
+
+@dataclass
+class Diagnostics:
+    """How a segmentation was found: noise level, starts, scores (for benchmarks and tuning).
+
+    Fields that a method does not produce keep their defaults (``None``, ``False``, empty).
+
+    Attributes
+    ----------
+    sigma_px : float
+        The endpoint noise level (px) the labels and covariances were computed at: a robust
+        estimate from the fit (NaN when nothing was estimated).
+    principal_point : (cx, cy) or None
+        Principal point (px) the tracks were solved with (given, or the image centre when the
+        intrinsics were unknown).
+    aspect : float
+        ``fy / fx`` of the solve (1 when the focal length was estimated).
+    image_size : (w, h) or None
+        Image size (px) of the solve.
+    focal_first_order : float or None
+        Unknown focal length: the first-order multibody estimate (px) before its refinement;
+        None when it was not determined (or the focal length was given).
+    candidate : str or None
+        Rotation-only robust solve: the start whose refinement won (``'previous'``: the
+        previous window's labels; ``'gpca-weighted'``, ``'gpca'``, ``'msac'``, ``'all'``;
+        ``'previous-pass'``: the warm start's final pass competing with the search).
+    candidate_costs : dict of str to float
+        Truncated total cost of every start the search scored (empty when none was scored).
+    potts_coupling : float or None
+        Coupling of the spatial smoothing in the final pass.
+    early_accept : bool
+        The first start was returned alone (clearly right; the other starts skipped).
+    warm_rejected : bool
+        The previous labels' final pass did not keep enough inliers and a search ran.
+    inlier_share : float or None
+        Share of the usable tracks the returned labels keep as inliers (robust solves).
+    n_bodies_scores : dict of int to float
+        ``n_bodies=0``: the score of every number of bodies tried (the smallest won).
+    start : str or None
+        Method 'general': where the returned segmentation started (``'warm'``: the tracked
+        previous motions; ``'rotation-only'``, ``'spatial'``, ``'previous'``: the starts of
+        the multi-start search).
+    score : float or None
+        Method 'general': the segmentation's score (capped marginalised cost plus position
+        terms) at its noise level.
+    translation_scales : (n,) float or None
+        Method 'general': the norm of every body's fitted translation (its unit direction is
+        :attr:`SegmentationResult.translation_directions`).
+    note : str or None
+        Why a method answered in a reduced form (e.g. 'general' on two frames).
+    """
+
+    sigma_px: float = math.nan
+    principal_point: Optional[Tuple[float, float]] = None
+    aspect: float = 1.0
+    image_size: Optional[Tuple[float, float]] = None
+    focal_first_order: Optional[float] = None
+    candidate: Optional[str] = None
+    candidate_costs: Dict[str, float] = field(default_factory=dict)
+    potts_coupling: Optional[float] = None
+    early_accept: bool = False
+    warm_rejected: bool = False
+    inlier_share: Optional[float] = None
+    n_bodies_scores: Dict[int, float] = field(default_factory=dict)
+    start: Optional[str] = None
+    score: Optional[float] = None
+    translation_scales: Optional[np.ndarray] = None
+    note: Optional[str] = None
 
 
 @dataclass
@@ -43,8 +113,16 @@ class SegmentationResult:
         Normalised cost of every track under every body (sum of squared whitened residuals).
     method : str
         The method that produced the result.
-    info : dict
-        Diagnostics (noise estimate, iterations, candidate costs, ...).
+    segmentation_angular_velocities : (n, 3) float64
+        The motions the labels were made with, rad per frame. The same as
+        ``angular_velocities`` except with method 'general', which publishes a refit of each
+        body's rotation; these go (with :attr:`translation_directions`) into the next window's
+        ``init_motions``, and are what a tracker of body ids should compare.
+    translation_directions : (n, 3) float64 or None
+        Unit translation direction of every body (method 'general'; zero rows for bodies
+        without a translation); None for the rotation-only methods.
+    diagnostics : Diagnostics
+        How the result was found (noise level, starts, scores).
     """
 
     labels: np.ndarray
@@ -54,7 +132,13 @@ class SegmentationResult:
     residuals: np.ndarray
     costs: np.ndarray
     method: str
-    info: Dict[str, object] = field(default_factory=dict)
+    segmentation_angular_velocities: Optional[np.ndarray] = None
+    translation_directions: Optional[np.ndarray] = None
+    diagnostics: Diagnostics = field(default_factory=Diagnostics)
+
+    def __post_init__(self) -> None:
+        if self.segmentation_angular_velocities is None:
+            self.segmentation_angular_velocities = self.angular_velocities
 
     @property
     def n_bodies(self) -> int:

@@ -28,7 +28,8 @@ its noise matches that of the tracks fitted one by one, nearly every track fits 
 well as alone, and the bodies are told apart (:data:`EARLY_RATIO`); the other starts (MSAC
 costs more than everything else together) are then skipped.
 """
-from typing import Optional, Tuple
+from dataclasses import replace
+from typing import NamedTuple, Optional, Tuple
 
 import numpy as np
 
@@ -37,19 +38,29 @@ from .ksubspaces import assign, ksubspaces, total_cost
 from .lines import first_midpoints, LineFlows
 from .models import (chi2_quantile, fit_bodies, median, normal_ridge, quad_costs,
                      solve_normal_equations, track_costs, track_stats, TrackStats)
+from .result import Diagnostics
 from .spatial import smooth_labels, spatial_neighbours
 
 #: A warm start is accepted alone when it leaves at least this share of the tracks as inliers
 #: (tracker noise is heavier-tailed than Gaussian: 78-88% measured on rendered windows).
 WARM_INLIERS = 0.75
 
-#: Whether a rejected warm start's final pass competes with the search's candidates (the
-#: default of ``robust_segmentation(warm_competes=...)``).
-WARM_COMPETES = True
-
 #: Outlier level: a track is rejected when its cost exceeds this chi-square quantile (99.99%:
 #: tracker noise is heavier-tailed than Gaussian; 99.9% left ~7% of rendered segments -1).
 OUTLIER_P = 0.9999
+
+
+class Segmentation(NamedTuple):
+    """A rotation-only segmentation: what the solves of this module return."""
+
+    #: (N,) body of every track, -1 unassigned.
+    labels: np.ndarray
+    #: (n, 3) Cayley vector of every body.
+    cayley: np.ndarray
+    #: (N, n) exact weighted cost of every track under every body.
+    costs: np.ndarray
+    #: Noise level, winning start, scores.
+    diagnostics: Diagnostics
 
 
 def noise_sigma(costs: np.ndarray, labels: np.ndarray, dof: np.ndarray,
@@ -82,8 +93,8 @@ def _sample_pairs(rng: np.random.Generator, pool: np.ndarray, mid: np.ndarray,
     return np.stack([first, second], axis=1)
 
 
-def _column_quantile(x: np.ndarray, q: float) -> np.ndarray:
-    """``np.quantile(x, q, axis=0)`` (method 'linear') of ``x (R, H)`` without nan, ``(H,)``.
+def column_quantile(x: np.ndarray, q: float) -> np.ndarray:
+    """Return ``np.quantile(x, q, axis=0)`` (method 'linear') of ``x (R, H)`` without nan.
 
     The same order statistics and interpolation as numpy, from one partition at the lower rank
     (numpy's quantile moves axes and partitions at extra ranks: 5x slower here).
@@ -124,7 +135,7 @@ def sequential_msac(stats: TrackStats, tracks: np.ndarray, n: int, dof: np.ndarr
         costs = quad_costs(stats, hyp)[pool]                          # (|pool|, H)
         per_dof = costs / np.maximum(dof[pool, None], 1.0)
         q = 0.5 / (n - body)
-        kth = _column_quantile(per_dof, q)
+        kth = column_quantile(per_dof, q)
         best = int(np.argmin(kth))
         if sigma2 is None:
             # inliers of the best body: per-dof chi-square, median ~ chi2_median(d) / d
@@ -140,17 +151,15 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
                         rng: np.random.Generator, sigma: Optional[float] = None,
                         init_labels: Optional[np.ndarray] = None,
                         warm_inliers: float = WARM_INLIERS,
-                        warm_competes: bool = WARM_COMPETES
-                        ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+                        warm_competes: bool = True) -> Segmentation:
     """Best of several initialisations, weighted K-subspaces, outliers rejected.
 
     ``init_labels`` (N,): the previous window's labels (``-1`` unknown). Their final pass is
     returned alone when it leaves at least ``warm_inliers`` of the usable tracks inliers;
     otherwise the other starts are searched and, with ``warm_competes``, it competes with them
     (scored like them).
-    Returns labels ``(N,)``, Cayley vectors ``(n, 3)``, exact costs ``(N, n)`` and diagnostics
-    (``info['inlier_share']``; ``info['warm_rejected']``: a search ran past the warm start's
-    final pass).
+    The diagnostics hold ``inlier_share`` and ``warm_rejected`` (a search ran past the warm
+    start's final pass).
     """
     stats = track_stats(flows, weighted=True)
     dof = 2.0 * flows.pairs_per_track()
@@ -170,12 +179,11 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
             c, _ = fit_bodies(flows, init, n)
             tried = True
             out = _final_pass(flows, tracks, init, c, dof, sigma, 'previous', {})
-            lab = out[0]
+            lab = out.labels
             counts = np.bincount(lab[lab >= 0], minlength=n)
             share = float(np.mean(lab[stats.usable] >= 0)) if stats.usable.any() else 0.0
             if np.all(counts >= 2) and share >= warm_inliers:
-                out[3]['inlier_share'] = share
-                return out
+                return out._replace(diagnostics=replace(out.diagnostics, inlier_share=share))
             if np.all(counts >= 2):
                 warm = out
         # still a candidate, refined like the others
@@ -224,16 +232,15 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
         # the warm start's own final pass competes too, scored at the same noise level: on
         # real scenes that the rotation model explains only in part it had been rejected for
         # fewer than warm_inliers inliers, and the search's winner then explained still fewer
-        w_score = total_cost(warm[2], warm[0], cap)
+        w_score = total_cost(warm.costs, warm.labels, cap)
         names.append('previous-pass')
         scores.append(w_score)
         if w_score < scores[best]:
-            name, lab, c, costs = 'previous-pass', warm[0], warm[1], warm[2]
+            name, lab, c, costs = 'previous-pass', warm.labels, warm.cayley, warm.costs
     out = _final_pass(flows, tracks, lab, c, dof, sigma, name, dict(zip(names, scores)), costs)
-    out[3]['inlier_share'] = (float(np.mean(out[0][stats.usable] >= 0))
-                              if stats.usable.any() else 0.0)
-    out[3]['warm_rejected'] = tried
-    return out
+    share = float(np.mean(out.labels[stats.usable] >= 0)) if stats.usable.any() else 0.0
+    return out._replace(diagnostics=replace(out.diagnostics, inlier_share=share,
+                                            warm_rejected=tried))
 
 
 def free_residuals(stats: TrackStats, dof: np.ndarray) -> np.ndarray:
@@ -285,9 +292,6 @@ EARLY_SHARE = 0.8
 #:    synthetic starts: 1% quantile 0.955).
 EARLY_SEPARATED = 0.95
 
-#: Switch for the early accept (benchmarks compare with and without).
-EARLY_ACCEPT = True
-
 
 def early_stats(stats: TrackStats, exact: np.ndarray, labels: np.ndarray, dof: np.ndarray,
                 sigma: Optional[float] = None) -> Optional[Tuple[float, float, float]]:
@@ -315,13 +319,11 @@ def early_stats(stats: TrackStats, exact: np.ndarray, labels: np.ndarray, dof: n
 
 
 def _early_accept(flows: LineFlows, tracks: np.ndarray, stats: TrackStats, first: tuple,
-                  dof: np.ndarray) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray, dict]]:
+                  dof: np.ndarray) -> Optional[Segmentation]:
     """Return the final pass of the refined first start when it is clearly right, else None.
 
     ``first``: ``(name, labels (N,), c (n, 3), quadratic costs (N, n))`` from K-subspaces.
     """
-    if not EARLY_ACCEPT:
-        return None
     name, lab, c, _ = first
     exact = track_costs(flows, c, weighted=True)
     sigma = noise_sigma(exact, lab, dof)           # the final pass's noise level as well
@@ -330,16 +332,14 @@ def _early_accept(flows: LineFlows, tracks: np.ndarray, stats: TrackStats, first
                             and test[2] >= EARLY_SEPARATED):
         return None
     out = _final_pass(flows, tracks, lab, c, dof, sigma, name, {}, exact)
-    if np.all(np.bincount(out[0][out[0] >= 0], minlength=c.shape[0]) >= 2):
-        out[3]['early_accept'] = True
-        return out
+    if np.all(np.bincount(out.labels[out.labels >= 0], minlength=c.shape[0]) >= 2):
+        return out._replace(diagnostics=replace(out.diagnostics, early_accept=True))
     return None
 
 
 def _final_pass(flows: LineFlows, tracks: np.ndarray, lab: np.ndarray, c: np.ndarray,
                 dof: np.ndarray, sigma: Optional[float], name: str, scores: dict,
-                costs: Optional[np.ndarray] = None
-                ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+                costs: Optional[np.ndarray] = None) -> Segmentation:
     """Exact costs, noise, outlier rejection, spatial smoothing, refit: outliers move no body.
 
     ``costs (N, n)``: the exact costs under ``c`` when already known.
@@ -364,6 +364,6 @@ def _final_pass(flows: LineFlows, tracks: np.ndarray, lab: np.ndarray, c: np.nda
         if same:
             break
         lab = new
-    info = {'sigma_px': sigma, 'candidate': name, 'candidate_costs': scores,
-            'potts_coupling': coupling}
-    return lab, c, costs, info
+    return Segmentation(lab, c, costs, Diagnostics(sigma_px=sigma, candidate=name,
+                                                   candidate_costs=scores,
+                                                   potts_coupling=coupling))

@@ -149,29 +149,3 @@ def structural_zeros(rows: np.ndarray, degree: int, tol: float = 0.0) -> np.ndar
     # monomial is non-zero on a row iff every variable it uses is non-zero there
     alive = (uses[None, :, :] <= nonzero[:, None, :]).all(axis=2)  # (R, M)
     return ~alive.any(axis=0)
-
-
-@lru_cache(maxsize=None)
-def relation_space(degree: int) -> np.ndarray:
-    """Orthonormal basis ``(M, q)`` of degree-n polynomials vanishing on every f-unknown row.
-
-    The first five coordinates of the f-unknown row (see :mod:`.focal`) depend on three
-    parameters up to scale, so they lie on a hypersurface: for n >= 4 a polynomial in
-    ``y1..y5`` alone vanishes on all rows whatever the motion (checked: rank 125 of 126 at
-    n = 4). Found numerically on random rows; ``q = 0`` for n <= 3. Columns index the 6-variable
-    embedding of :func:`exponents`.
-    """
-    from .focal import unknown_f_rows_from_normals   # local: focal imports this module
-    rng = np.random.default_rng(12345)
-    n_rows = 4 * comb(degree + 4, 4)
-    m = rng.normal(size=(n_rows, 3))
-    e = np.cross(m, rng.normal(size=(n_rows, 3)))
-    rows = unknown_f_rows_from_normals(m, e, np.zeros((n_rows, 3)))[:, :5]
-    v = embed(rows / np.linalg.norm(rows, axis=1, keepdims=True), degree)
-    _, s, vt = np.linalg.svd(v)
-    null5 = vt[int(np.sum(s > s[0] * 1e-9)):].T                 # (M5, q)
-    exps6 = exponents(6, degree)
-    out = np.zeros((exps6.shape[0], null5.shape[1]))
-    for k, e5 in enumerate(exponents(5, degree)):               # index map, built once per n
-        out[monomial_index(exps6, tuple(e5) + (0,)), :] = null5[k]
-    return out

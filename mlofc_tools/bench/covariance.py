@@ -25,9 +25,10 @@ chi-square with 3 degrees of freedom: median 2.37, 95% of the frames <= 7.81. La
 mean the covariance claims more than the estimate delivers (a filter fusing it would trust it
 too much).
 
-Rows: ``general`` with and without :data:`~mlofc_ros.solver.general.COVARIANCE_FIT_SCALE`
-(the body's reduced chi-square) on the same sequences, and, as the reference, ``robust``
-(rotation-only, the default method) on the camera-centre scene where its model holds. Boxes
+Rows: ``general`` (each body's covariance scaled by its reduced chi-square when above 1,
+:func:`mlofc_ros.solver.general.body_covariance`) on every scene, and, as the reference,
+``robust`` (rotation-only, the default method) on the camera-centre scene where its model
+holds. Boxes
 are split by their omega error: a box fitted in a wrong basin (error > 5%) is a second
 minimum, which no local covariance covers.
 """
@@ -43,11 +44,11 @@ from mlofc_tools.bench import common, spinning
 #: chi-square quantiles, 3 degrees of freedom: median and 95%.
 CHI2_3_MEDIAN, CHI2_3_95 = 2.366, 7.815
 
-#: (label, scene, method, window, COVARIANCE_FIT_SCALE)
-CONFIGS: Tuple[Tuple[str, str, str, int, bool], ...] = tuple(
-    [(f'{scene} general', scene, 'general', 10, scaled)
-     for scene in ('own2+bg', 'own3+bg', 'own2', 'own3', 'cam2+bg') for scaled in (True, False)]
-    + [('cam2+bg robust', 'cam2+bg', 'robust', 5, False)])
+#: (label, scene, method, window)
+CONFIGS: Tuple[Tuple[str, str, str, int], ...] = tuple(
+    [(f'{scene} general', scene, 'general', 10)
+     for scene in ('own2+bg', 'own3+bg', 'own2', 'own3', 'cam2+bg')]
+    + [('cam2+bg robust', 'cam2+bg', 'robust', 5)])
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -58,13 +59,12 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--jobs', type=int, default=2, help='runs in this many processes')
     ap.add_argument('--out', default=None, help='output folder (default docs/results/covariance)')
     ap.add_argument('--quick', action='store_true',
-                    help='smoke run: seed 0, 8 frames, own2 general (scaled) and cam2+bg robust')
+                    help='smoke run: seed 0, 8 frames, own2 general and cam2+bg robust')
     args = ap.parse_args(list(argv))
     args.configs = list(CONFIGS)
     if args.quick:
         args.seeds, args.frames, args.jobs = '0', 8, 1
-        args.configs = [c for c in CONFIGS if c[0] == 'cam2+bg robust'
-                        or (c[0] == 'own2 general' and c[4])]
+        args.configs = [c for c in CONFIGS if c[0] in ('cam2+bg robust', 'own2 general')]
     args.seed_list = [int(s) for s in args.seeds.split(',') if s]
     return args
 
@@ -92,20 +92,15 @@ def box_nees(seq, outs, first: int) -> List[Dict[str, float]]:
     return boxes
 
 
-def run_one(item: Tuple[Tuple[str, str, str, int, bool], int, int]) -> Dict[str, object]:
+def run_one(item: Tuple[Tuple[str, str, str, int], int, int]) -> Dict[str, object]:
     """One configuration on one seed (module level: run in a worker process)."""
-    (label, scene, method, window, scaled), seed, frames = item
+    (label, scene, method, window), seed, frames = item
     from mlofc_tools.render import render_sequence
-    from mlofc_ros.solver import general
     motion, boxes, background = spinning.SCENES[scene]
     seq = render_sequence(n_boxes=boxes, n_frames=frames, size=(640, 480), motion=motion,
                           background=background, seed=seed)
-    default, general.COVARIANCE_FIT_SCALE = general.COVARIANCE_FIT_SCALE, scaled
-    try:
-        outs = spinning.run_pipeline(seq, method, window)
-    finally:
-        general.COVARIANCE_FIT_SCALE = default     # --jobs 1 runs in this process
-    return {'label': label, 'scaled': scaled, 'seed': seed,
+    outs = spinning.run_pipeline(seq, method, window)
+    return {'label': label, 'seed': seed,
             'boxes': box_nees(seq, outs, min(window - 1, frames - 1))}
 
 
@@ -119,19 +114,17 @@ def _stats(boxes: Sequence[Dict[str, object]]) -> List[object]:
 
 def summary_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
     rows = []
-    for label, _, method, window, scaled in CONFIGS:
-        boxes = [b for r in records if r['label'] == label and r['scaled'] == scaled
-                 for b in r['boxes']]
+    for label, _, _, window in CONFIGS:
+        boxes = [b for r in records if r['label'] == label for b in r['boxes']]
         if not boxes:
             continue
         good = [b for b in boxes if b['omega_err'] <= 0.05]
         bad = [b for b in boxes if b['omega_err'] > 0.05]
-        rows.append([label, window, 'yes' if scaled else 'no'] + _stats(good) + _stats(bad)
-                    + _stats(boxes))
+        rows.append([label, window] + _stats(good) + _stats(bad) + _stats(boxes))
     return rows
 
 
-HEADERS = ['scene, method', 'window', 'fit scale', 'boxes err <= 5%', 'NEES median',
+HEADERS = ['scene, method', 'window', 'boxes err <= 5%', 'NEES median',
            'frames NEES <= 7.81', 'boxes err > 5%', 'NEES median', 'frames NEES <= 7.81',
            'all boxes', 'NEES median', 'frames NEES <= 7.81']
 

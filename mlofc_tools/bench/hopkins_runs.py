@@ -246,7 +246,7 @@ def _robust_diagnostics(tracks: np.ndarray, labels: np.ndarray, seq, res
     f = float(res.focal_length)
     flows = line_flows(tracks, (f, f, w / 2.0, h / 2.0))
     cap = (chi2_quantile(OUTLIER_P, 2.0 * flows.pairs_per_track())
-           * float(res.info['sigma_px']) ** 2)
+           * float(res.diagnostics.sigma_px) ** 2)
     costs = np.where(np.isfinite(res.costs), res.costs, np.inf)
     loose = np.where(np.min(costs, axis=1) <= LOOSE_BOUND * cap, np.argmin(costs, axis=1), -1)
     c, _ = fit_bodies(flows, labels, seq.n_motions)
@@ -270,21 +270,21 @@ def _general_diagnostics(tracks: np.ndarray, labels: np.ndarray, seq, res, seed:
     """
     from mlofc_ros.solver import general as gm
     from mlofc_ros.solver import segment_lines
+    from mlofc_ros.solver.general_method import ROTATION_STEP
     from mlofc_ros.solver.spatial import spatial_neighbours
 
     n = seq.n_motions
-    rot = segment_lines(tracks, n, None, seq.image_size, 'robust', seed=seed,
-                        warm_competes=False)
+    rot = segment_lines(tracks, n, None, seq.image_size, 'robust', seed=seed, **ROTATION_STEP)
     f = float(rot.focal_length)
-    cx, cy = rot.info['principal_point']
-    obs = gm.LineObservations(tracks, (f, f * rot.info.get('aspect', 1.0), cx, cy))
+    cx, cy = rot.diagnostics.principal_point
+    obs = gm.LineObservations(tracks, (f, f * rot.diagnostics.aspect, cx, cy))
     neighbours = spatial_neighbours(obs.midpoints)
     sol, again = (gm.general_search(obs, n, [(name, lab)], rot.labels, rot.angular_velocities,
                                     neighbours, points=obs.midpoints)
                   for name, lab in (('truth', labels), ('answer', res.labels)))
     # the method's answer is not always a fixed point of its search: compared with both it
     # and a search restarted from it, a cheaper truth start is a basin the search missed
-    best = min(float(res.info['score']), float(again['score']))
+    best = min(float(res.diagnostics.score), float(again['score']))
     return {'truth_cheaper': float(sol['score'] < best),
             'truth_start_miscl': misclassification(sol['labels'], labels, n)}
 

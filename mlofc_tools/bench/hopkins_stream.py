@@ -13,8 +13,8 @@
 # limitations under the License.
 """Hopkins155 line tracks streamed through `general`'s warm path, as the node solves them.
 
-``python -m mlofc_tools.bench hopkins_stream [--motions 3] [--sequences ...] [--variants ...]
-[--out DIR]`` writes ``README.md`` to ``docs/results/hopkins_stream/`` (or ``--out``), prints it
+``python -m mlofc_tools.bench hopkins_stream [--motions 3] [--sequences ...] [--out DIR]``
+writes ``README.md`` to ``docs/results/hopkins_stream/`` (or ``--out``), prints it
 (the 35 three-motion sequences by default, ~22 min on 2 cores).
 
 `bench hopkins` solves each K-frame window cold. A node sees the sequence as a stream: one
@@ -24,20 +24,15 @@ line tracks are built once, in the sequence's first frame
 `bench hopkins`), and go frame by frame through
 :meth:`mlofc_ros.pipeline.Pipeline.process_lines` (``method='general'``, ``window`` K = 5,
 the node's other defaults): the node's own solve path, body ids and all. The first frames,
-until the window holds ``pipeline.GENERAL_MIN_FRAMES``, are solved rotation-only; then the
-first full window is searched (from those labels too) and every later one is warm-started
-with every body rescanned (``pipeline.RESCAN_EVERY_BODY``); focal length unknown, estimated
+until the window holds ``solver.methods.GENERAL_MIN_FRAMES``, are solved rotation-only; then
+the first full window is searched (from those labels too) and every later one is
+warm-started (from the previous labels and from every track reassigned at the previous
+motions, the lower score kept) with every body rescanned; focal length unknown, estimated
 per window until ``pipeline.FOCAL_SAMPLES`` estimates, then fixed at their median. Scored on
 the published labels of every full window (a line the solver leaves unassigned keeps its last
 body for ``label_memory`` frames, as the node publishes it; ``-1`` counts as wrong). Stamps
-are 30 frames/s (only the published rad/s depend on them).
-
-Variants (``--variants``) set :data:`mlofc_ros.solver.core.WARM_KEEP_LABELS` and
-``WARM_ALSO_REASSIGNED``: ``kept`` (tracks keep their previous label as the start of the warm
-segmentation), ``reassigned`` (before session 28: every track reassigned by the
-fitted-direction costs at the previous motions) and ``both`` (the two starts, the lower
-score kept). Reference on the same lines: the cold search (as `bench
-hopkins`, f unknown) at the middle and the last window.
+are 30 frames/s (only the published rad/s depend on them). Reference on the same lines: the
+cold search (as `bench hopkins`, f unknown) at the middle and the last window.
 """
 import argparse
 import os
@@ -56,35 +51,20 @@ from mlofc_tools.datasets import hopkins as hk
 K = 5
 #: Stamps of the streamed frames (frames/s).
 FPS = 30.0
-#: Variant -> (core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED).
-VARIANT_SETTINGS = {'kept': (True, False), 'both': (True, True), 'reassigned': (False, False)}
-VARIANTS = tuple(VARIANT_SETTINGS)
 QUICK_SEQUENCE = 'three-cars'
 
 
-def stream_sequence(path: str, variant: str, seed: int = 155, windows: Optional[int] = None,
+def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
                     cold: bool = True) -> Dict[str, object]:
     """Stream one sequence through the warm path; per-window misclassification (worker).
 
     ``windows``: stop after this many (default: to the end of the sequence); ``cold=False``
     skips the cold reference solves.
 
-    Returns a record: ``name``, ``n``, ``frames``, ``lines``, ``variant``, ``stream`` (the
+    Returns a record: ``name``, ``n``, ``frames``, ``lines``, ``stream`` (the
     misclassification of every window, first to last), ``cold_mid`` / ``cold_last`` (the
     cold search at the middle / last window), ``cpu_warm`` (median CPU s per warm solve).
     """
-    from mlofc_ros.solver import core
-
-    saved = core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED
-    core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED = VARIANT_SETTINGS[variant]
-    try:                                 # in-process runs (--jobs 1) get the defaults back
-        return _stream(path, variant, seed, windows, cold)
-    finally:
-        core.WARM_KEEP_LABELS, core.WARM_ALSO_REASSIGNED = saved
-
-
-def _stream(path: str, variant: str, seed: int, windows: Optional[int], cold: bool
-            ) -> Dict[str, object]:
     from mlofc_ros.pipeline import Pipeline
     from mlofc_ros.solver import segment_lines
 
@@ -107,7 +87,7 @@ def _stream(path: str, variant: str, seed: int, windows: Optional[int], cold: bo
         if t >= K - 1:
             stream.append(common.misclassification(res.labels, truth, n))
     rec = {'name': seq.name, 'group': seq.group, 'n': n, 'frames': frames,
-           'lines': int(len(truth)), 'variant': variant, 'stream': stream,
+           'lines': int(len(truth)), 'stream': stream,
            'cpu_warm': float(np.median(cpu)) if cpu else float('nan')}
     last = frames - K
     for key, start in (('cold_mid', last // 2), ('cold_last', last)) if cold else ():
@@ -122,45 +102,34 @@ def _unit(item) -> Dict[str, object]:
 
 
 def summary_table(records: Sequence[Dict[str, object]]) -> str:
-    """Markdown: mean (median) misclassification % per motions and variant."""
-    lines = ['| motions | sequences | variant | every window | middle window | last window '
+    """Markdown: mean (median) misclassification % per number of motions."""
+    lines = ['| motions | sequences | every window | middle window | last window '
              '| cold search, middle | cold search, last | CPU s per warm solve (median) |',
-             '|--:|--:|:--|--:|--:|--:|--:|--:|--:|']
+             '|--:|--:|--:|--:|--:|--:|--:|--:|']
 
     def cell(v: List[float]) -> str:
         return f'{100 * np.mean(v):.1f} ({100 * np.median(v):.1f})' if v else '-'
     for n in sorted({r['n'] for r in records}):
-        for variant in VARIANTS:
-            sel = [r for r in records if r['n'] == n and r['variant'] == variant]
-            if not sel:
-                continue
-            mid = [r['stream'][min((r['frames'] - K) // 2, len(r['stream']) - 1)] for r in sel]
-            cold = {key: [r[key] for r in records if r['n'] == n and key in r]
-                    for key in ('cold_mid', 'cold_last')}
-            lines.append(
-                f'| {n} | {len(sel)} | {variant} | {cell([np.mean(r["stream"]) for r in sel])} '
-                f'| {cell(mid)} | {cell([r["stream"][-1] for r in sel])} '
-                f'| {cell(cold["cold_mid"])} | {cell(cold["cold_last"])} '
-                f'| {np.median([r["cpu_warm"] for r in sel]):.2f} |')
+        sel = [r for r in records if r['n'] == n]
+        mid = [r['stream'][min((r['frames'] - K) // 2, len(r['stream']) - 1)] for r in sel]
+        cold = {key: [r[key] for r in sel if key in r] for key in ('cold_mid', 'cold_last')}
+        lines.append(
+            f'| {n} | {len(sel)} | {cell([np.mean(r["stream"]) for r in sel])} '
+            f'| {cell(mid)} | {cell([r["stream"][-1] for r in sel])} '
+            f'| {cell(cold["cold_mid"])} | {cell(cold["cold_last"])} '
+            f'| {np.median([r["cpu_warm"] for r in sel]):.2f} |')
     return '\n'.join(lines)
 
 
 def sequence_table(records: Sequence[Dict[str, object]]) -> str:
-    """Markdown: per sequence, every window's mean % per variant and the cold search's."""
-    names = sorted({r['name'] for r in records})
-    by = {(r['name'], r['variant']): r for r in records}
-    variants = [v for v in VARIANTS if any(r['variant'] == v for r in records)]
-    lines = ['| sequence | motions | frames | lines | '
-             + ' | '.join(f'{v}: every / last window' for v in variants)
-             + ' | cold: middle / last |', '|:--|--:|--:|--:|' + '--:|' * (len(variants) + 1)]
-    for name in names:
-        rs = [by[(name, v)] for v in variants if (name, v) in by]
-        r0 = next((r for r in rs if 'cold_mid' in r), rs[0])
-        cells = ' | '.join(f'{100 * np.mean(r["stream"]):.1f} / {100 * r["stream"][-1]:.1f}'
-                           for r in rs)
-        cold = (f'{100 * r0["cold_mid"]:.1f} / {100 * r0["cold_last"]:.1f}'
-                if 'cold_mid' in r0 else '-')
-        lines.append(f'| {name} | {r0["n"]} | {r0["frames"]} | {r0["lines"]} | {cells} '
+    """Markdown: per sequence, every window's mean % and the last, and the cold search's."""
+    lines = ['| sequence | motions | frames | lines | every / last window '
+             '| cold: middle / last |', '|:--|--:|--:|--:|--:|--:|']
+    for r in sorted(records, key=lambda r: r['name']):
+        cold = (f'{100 * r["cold_mid"]:.1f} / {100 * r["cold_last"]:.1f}'
+                if 'cold_mid' in r else '-')
+        lines.append(f'| {r["name"]} | {r["n"]} | {r["frames"]} | {r["lines"]} '
+                     f'| {100 * np.mean(r["stream"]):.1f} / {100 * r["stream"][-1]:.1f} '
                      f'| {cold} |')
     return '\n'.join(lines)
 
@@ -174,20 +143,16 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--motions', type=int, default=None,
                    help='only sequences with this many motions (default 3 without '
                         '--sequences; 0 = all)')
-    p.add_argument('--variants', default=','.join(VARIANTS), help=f'subset of {VARIANTS}')
     p.add_argument('--windows', type=int, default=None,
                    help='stop each stream after this many windows (default: its end)')
     p.add_argument('--quick', action='store_true',
-                   help=f'smoke run: {QUICK_SEQUENCE}, 3 windows, every variant, one process')
+                   help=f'smoke run: {QUICK_SEQUENCE}, 3 windows, one process')
     p.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1))
     p.add_argument('--out', default=None,
                    help='output folder (default docs/results/hopkins_stream)')
     args = p.parse_args(list(argv))
     if args.quick:
         args.sequences, args.windows, args.jobs = QUICK_SEQUENCE, 3, 1
-    args.variants = [v.strip() for v in args.variants.split(',') if v.strip()]
-    if not args.variants or set(args.variants) - set(VARIANTS):
-        p.error(f'--variants: choose from {VARIANTS}')
     return args
 
 
@@ -205,10 +170,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     motions = args.motions if args.motions is not None else (0 if args.sequences else 3)
     if motions:
         paths = [p for p in paths if n_motions_of(p) == motions]
-    # the cold reference once per sequence (it does not depend on the variant)
     # cut streams (--windows) have no middle or last window to compare with
-    items = [(str(p), v, 155, args.windows, v == args.variants[0] and args.windows is None)
-             for p in paths for v in args.variants]
+    items = [(str(p), 155, args.windows, args.windows is None) for p in paths]
     t0 = time.perf_counter()
     records = common.run_parallel(_unit, items, args.jobs, 'sequences')
     seconds = time.perf_counter() - t0

@@ -35,8 +35,8 @@ node runs (minus DDS). Scored on the frames with a full window, like
   small spinning body can see;
 - ``ms/frame``: CPU time of ``Pipeline.process`` per frame: median and p95 over the scored
   frames, max over all frames ('general' runs its full multi-start search on the first window
-  of :data:`~mlofc_ros.pipeline.GENERAL_MIN_FRAMES` frames and whenever tracking the previous
-  motions leaves too few inliers).
+  of :data:`~mlofc_ros.solver.methods.GENERAL_MIN_FRAMES` frames and whenever tracking the
+  previous motions leaves too few inliers).
 
 Every scene is rendered with several seeds (0, 1, 2 by default): one run is a single draw
 from a chaotic process (a body fitted in a wrong basin in one frame keeps it through the warm

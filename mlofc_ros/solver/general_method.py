@@ -1,0 +1,273 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Method ``'general'``: a rotation AND a translation per body (the model of :mod:`.general`).
+
+The rotation-only step (:func:`.solve_robust`, as :data:`ROTATION_STEP`) supplies the focal
+length when it is unknown and a start; the bodies are then either tracked from the previous
+window's labels and motions (:func:`.general_warm`, then the marginalised segmentation) or
+found by the multi-start search (:func:`.general_search`). Every body is then refit at the
+measured noise with the robust line cost (:func:`.polish_body`; tracked bodies marked for a
+rescan are also refit from the pivot starts), and the published rotation is a further refit
+at a fraction of that noise (:data:`PUBLISH_NOISE_SCALE`).
+"""
+from dataclasses import replace
+from types import MappingProxyType
+from typing import Mapping, NamedTuple, Optional, Tuple
+
+import numpy as np
+
+from .general import (body_covariance, fit_body_multistart, general_search, general_warm,
+                      LineObservations, marginal_segmentation, NOISE_FACTOR, polish_body,
+                      spatial_labels, WARM_INLIERS)
+from .problem import Problem
+from .result import SegmentationResult
+from .rotation import solve_robust
+from .spatial import spatial_neighbours
+
+#: How the method runs its rotation-only step: the robust solve without a lowered bar for the
+#: warm start and without the warm start competing with the search (the session-17 changes,
+#: tuned for 'robust' alone): bench live's own3+bg at 10 Hz, whose runs swing by 5-10 points,
+#: was 12.6-14.7% wrong in three runs with one or both, against 5.3-7.4% in four without. The
+#: pipeline's stand-in for the method's first frames is run the same way
+#: (:data:`.methods.ROTATION_STEP`).
+ROTATION_STEP: Mapping[str, object] = MappingProxyType({'warm_competes': False})
+
+#: Frames the model needs (the translation is seen from the third on); with fewer the method
+#: answers with its rotation-only step.
+MODEL_FRAMES = 3
+
+#: LM iterations of the final refit of every body at the measured noise level.
+POLISH_ITERATIONS = 10
+
+#: The published rotation of every body is refit (:func:`.polish_body`, robust) at this fraction
+#: of the measured noise variance, from the segmentation's motion and on its lines, which keep
+#: their labels; the segmentation, the pipeline's body ids and the next window's warm start
+#: keep the segmentation's motion. The marginalised model's prior on the line directions pulls
+#: W towards a rotation-only fit by ~sigma2 (3.4% of |w| at :data:`.general.NOISE_FACTOR`, ~1%
+#: at the measured noise); at a small fraction of it the model tends to the fitted-direction
+#: one, unbiased near the right basin, and the robust cost at that scale lets the few
+#: mislabelled lines hardly pull. Spinning benchmark (window 10, render seeds 0-5, the same
+#: labels), boxes with omega within 5% own2+bg / own3+bg / own3: 7 / 14 / 13 -> 9 / 17 / 18
+#: of 12 / 18 / 18, median error 2 / 3 / 2 -> 0 / 1 / 1%, for one more refit per body per
+#: frame (session 19, docs/design.md). None: publish the segmentation's motion.
+PUBLISH_NOISE_SCALE: Optional[float] = 0.01
+
+#: A rescanned body (``rescan`` of :func:`.segment_lines`) takes the pivot search's fit
+#: whenever it is cheaper than the tracked one by this share of its cost. The final refit of
+#: every body and the rescan's pivot search and comparison use the robust (Cauchy) line cost
+#: at the measured noise, the warm and segmentation fits least squares (the robust cost in
+#: every fit as well, helper branch h33, was not adopted: 4.2 / 9.4 / 6.4 / 8.8 -> 7.8 / 11.9
+#: / 2.7 / 1.5 on an earlier front end, better without a background body and worse with one;
+#: design.md). Spinning benchmark, window 10, six seeds, mean wrong % own2+bg / own3+bg /
+#: own2 / own3, least squares -> robust: 4.6 / 16.9 / 2.1 / 9.8 -> 4.0 / 13.3 / 1.6 / 5.3
+#: (margin 0; 3.1 / 17.4 / 1.7 / 7.8 with 0.1, which kept own3+bg seed 4 in a wrong basin,
+#: 32% wrong, 13% with none: the robust cost makes a wrong basin only ~10% dearer), cam2+bg
+#: 0.09 -> 0.10 (design.md, session 10, h34). The pivot search refines the best start of
+#: every rate, not the best four overall (:func:`.general.pivot_picks`): a body fitted as
+#: nearly static, its flow explained by a translation, ranks the starts at its true rate low
+#: before any LM step (session 23; render seeds 0-11, 3.13 / 4.72 / 0.18 / 1.09 -> 2.08 /
+#: 4.29 / 0.21 / 0.50, boxes with omega within 5% 106 -> 108 of 120, ~+6-10% CPU per frame;
+#: the cold search keeps the global ranking: the best four plus the best of every rate there
+#: took the 35 three-motion Hopkins155 sequences from 10.5 to 10.7%).
+RESCAN_MARGIN = 0.0
+
+#: Weight of each body's image-position term (:func:`.general.position_costs`, times the
+#: noise level) in the warm path's assignment (the pipeline's tracked bodies; the cold search
+#: uses :data:`.general.POSITION_WEIGHT`). Spinning benchmark, window 10, mean wrong % own2+bg
+#: / own3+bg / own2 / own3 over render seeds 0-5: none 6.5 / 10.6 / 1.6 / 5.2, 0.5 2.8 / 9.8 /
+#: 0.7 / 6.0, 1.0 2.3 / 10.5 / 0.4 / 3.0, 2.0 7.6 / 7.5 / 0.1 / 2.5; held-out seeds 6-8:
+#: none 3.3 / 9.1 / 0.4 / 3.9, 1.0 3.4 / 3.8 / 0.0 / 0.5; cam2+bg 0.10 -> 0.07 (session 13).
+WARM_POSITION_WEIGHT = 1.0
+
+
+class _Tracked(NamedTuple):
+    """The warm path's segmentation and the noise level its LM refit measured."""
+
+    solution: dict
+    refit_sigma2: float
+
+
+def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
+                  init_motions: Optional[Tuple[np.ndarray, np.ndarray]] = None,
+                  rescan: Optional[np.ndarray] = None) -> SegmentationResult:
+    """Solve ``problem`` with a rotation and a translation per body.
+
+    ``init_labels (N,)``: the previous window's labels (``-1`` unknown, ids below n);
+    ``init_motions``: its motions ``(W (n, 3), T (n, 3))``, NaN rows unknown; ``rescan (n,)``
+    bool: the tracked bodies to refit from the pivot starts too. With fewer than
+    :data:`MODEL_FRAMES` frames the rotation-only step answers.
+    """
+    rot = solve_robust(problem, init_labels=init_labels, **ROTATION_STEP)
+    if problem.tracks.shape[1] < MODEL_FRAMES:
+        note = f'window has fewer than {MODEL_FRAMES} frames: rotation-only result'
+        return replace(rot, method='general', diagnostics=replace(rot.diagnostics, note=note))
+    d = rot.diagnostics
+    f = rot.focal_length
+    obs = LineObservations(problem.tracks, (f, f * d.aspect) + tuple(d.principal_point))
+    neighbours = spatial_neighbours(obs.midpoints)
+    tracked = None
+    if init_labels is not None and init_motions is not None:
+        tracked = _track(obs, rot, init_labels, init_motions, neighbours)
+    if tracked is None:
+        sol = _search(obs, rot, init_labels, neighbours, np.random.default_rng(problem.seed))
+        sigma2 = sol['sigma2'] / NOISE_FACTOR
+    else:
+        sol = tracked.solution
+        # the labels need the inflated noise level (NOISE_FACTOR); the motions are refit on
+        # them at the measured one, where the prior on the line directions biases them less
+        # (about 2% of |w| at x8 on noise-free spinning bodies, 0.2% at x1)
+        sigma2 = min(sol['sigma2'] / NOISE_FACTOR, tracked.refit_sigma2)
+    if tracked is None or rescan is None:
+        rescan = np.zeros(rot.n_bodies, dtype=bool)    # only tracked bodies are rescanned
+    _refit_bodies(obs, sol, sigma2, rescan)
+    return _result(obs, rot, sol, sigma2)
+
+
+def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarray,
+           init_motions: Tuple[np.ndarray, np.ndarray], neighbours: np.ndarray
+           ) -> Optional[_Tracked]:
+    """Track the previous window's bodies; None when they no longer explain the window.
+
+    The lines are assigned at the previous motions as they are (a few LM steps on the flat
+    fitted-direction model moved a body with few lines into another basin: own2+bg s2, frame
+    212, 137 -> 28 deg/s about y; it lost its lines to a neighbour and the ids came back
+    permuted 20 frames later; session 14, render seeds 0-2 over 300 frames, own2+bg / own3+bg
+    11.6 / 28.0 -> 1.2 / 3.2% wrong), and the marginalised segmentation starts from them.
+    Starts: the previous labels where the tracks had one (the assignment for the others), and
+    every track assigned at the previous motions; the lower score is kept (session 28: the
+    fitted-direction costs carry little first-order information at short windows and right
+    groupings fell apart in the next windows, Hopkins155 streamed 23.3 -> 10.6%; the
+    reassigned start repairs groupings a wrong first search left: spinning seeds 0-11, wrong %
+    own2+bg / own3+bg / own2 / own3 3.6 / 5.3 / 0.2 / 2.0 -> 1.6 / 3.9 / 0.2 / 1.2, +12-25%
+    CPU per frame). Each body is a blob in the image too (:data:`WARM_POSITION_WEIGHT`). The
+    LM refit from the previous motions still measures the noise of the final refit and the
+    rescan when it fits better: at a motion from a wrong basin the noise would be inflated and
+    the rescan could not leave it.
+    """
+    w0, t0 = init_motions
+    known = np.all(np.isfinite(w0), axis=1) & np.all(np.isfinite(t0), axis=1)
+    if not np.any(known):
+        return None
+    w_start = np.where(known[:, None], w0, rot.angular_velocities)
+    t_start = np.where(known[:, None], t0, 0.0)
+    warm = general_warm(obs, init_labels, w_start, t_start, known, iterations=0)
+    if warm['inliers'] < WARM_INLIERS:
+        return None
+    refit_sigma2 = general_warm(obs, init_labels, w_start, t_start, known)['sigma2']
+    W = np.where(known[:, None], w0, warm['W'])
+    T = np.where(known[:, None], t0, warm['T'])
+    prev = np.asarray(init_labels)
+    starts = [('warm', np.where(prev >= 0, prev, warm['labels'])), ('warm', warm['labels'])]
+    sol = marginal_segmentation(obs, rot.n_bodies, starts, W, T, NOISE_FACTOR * warm['sigma2'],
+                                rounds=2, iterations=4, neighbours=neighbours, keep=1,
+                                first_iterations=4, pivots=False, points=obs.midpoints,
+                                position_weight=WARM_POSITION_WEIGHT)
+    return _Tracked(sol, refit_sigma2)
+
+
+def _search(obs: LineObservations, rot: SegmentationResult, init_labels: Optional[np.ndarray],
+            neighbours: np.ndarray, rng: np.random.Generator) -> dict:
+    """Find the bodies by the multi-start search.
+
+    Starts: the previous labels (when given), the rotation-only labels, a spatial clustering.
+    """
+    n = rot.n_bodies
+    starts = [('rotation-only', rot.labels), ('spatial', spatial_labels(obs.midpoints, n, rng))]
+    if init_labels is not None:
+        starts.insert(0, ('previous', np.asarray(init_labels)))
+    return general_search(obs, n, starts, rot.labels, rot.angular_velocities, neighbours,
+                          points=obs.midpoints)
+
+
+def _refit_bodies(obs: LineObservations, sol: dict, sigma2: float, rescan: np.ndarray) -> None:
+    """Refit every body of ``sol`` in place at the measured noise ``sigma2`` (robust cost).
+
+    A body marked in ``rescan`` (tracked: it took only a few LM steps from the previous
+    window's motion, so a wrong basin -- a pivot, the depth reversal -- would stay window after
+    window) is also refit from the full search's pivot starts, compared at the measured noise
+    (the inflated one flattens the cost and often prefers a wrong basin), and keeps the
+    cheaper fit (:data:`RESCAN_MARGIN`).
+    """
+    labels = sol['labels']
+    for b in range(sol['W'].shape[0]):                   # bodies, not lines
+        idx = np.flatnonzero(labels == b)
+        if idx.size < 3:
+            continue
+        fit = polish_body(obs, idx, sol['W'][b], sol['T'][b], POLISH_ITERATIONS, sigma2, sigma2)
+        if rescan[b]:
+            alt = fit_body_multistart(obs, idx, fit[0], fit[1], POLISH_ITERATIONS, 1, sigma2,
+                                      obs.body_ray(idx), robust=sigma2, per_rate=True)
+            fit = alt if alt[2] < (1.0 - RESCAN_MARGIN) * fit[2] else fit
+        sol['W'][b], sol['T'][b] = fit[0], fit[1]
+
+
+def _result(obs: LineObservations, rot: SegmentationResult, sol: dict, sigma2: float
+            ) -> SegmentationResult:
+    """Make the method's result: published motions and covariances, residuals, diagnostics."""
+    labels = sol['labels']
+    W_pub, cov = _published(obs, labels, sol['W'], sol['T'], sigma2)
+    dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
+    scale = np.linalg.norm(sol['T'], axis=1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        best = sol['costs'][np.arange(labels.shape[0]),
+                            np.where(labels >= 0, labels,
+                                     np.argmin(np.nan_to_num(sol['costs'], nan=np.inf), 1))]
+        rms = np.where(dof > 0, np.sqrt(best / dof), np.nan)
+        directions = np.where(scale[:, None] > 0, sol['T'] / scale[:, None], 0.0)
+    diagnostics = replace(rot.diagnostics, sigma_px=float(np.sqrt(sigma2)), start=sol['start'],
+                          score=float(sol['score']), translation_scales=scale)
+    return SegmentationResult(labels=labels, angular_velocities=W_pub, angular_covariances=cov,
+                              focal_length=rot.focal_length, residuals=rms, costs=sol['costs'],
+                              method='general', segmentation_angular_velocities=sol['W'],
+                              translation_directions=directions, diagnostics=diagnostics)
+
+
+def _published(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
+               sigma2: float) -> Tuple[np.ndarray, np.ndarray]:
+    """Return the published rotation vectors ``(n, 3)`` and their covariances ``(n, 3, 3)``.
+
+    Each body's refit (:func:`published_motions`); a body whose refit has no finite covariance
+    publishes the segmentation's motion ``W`` (nor would it decide, through the pipeline's
+    validity, which bodies are tracked).
+    """
+    W_pub, T_pub = published_motions(obs, labels, W, T, sigma2)
+    cov = np.empty((W.shape[0], 3, 3))
+    for b in range(W.shape[0]):                           # bodies, not lines
+        idx = np.flatnonzero(labels == b)
+        cov[b] = body_covariance(obs, idx, W_pub[b], T_pub[b], sigma2, marginal=True)
+        if not np.all(np.isfinite(cov[b])) and not np.array_equal(W_pub[b], W[b]):
+            W_pub[b], T_pub[b] = W[b], T[b]
+            cov[b] = body_covariance(obs, idx, W_pub[b], T_pub[b], sigma2, marginal=True)
+    return W_pub, cov
+
+
+def published_motions(obs: LineObservations, labels: np.ndarray, W: np.ndarray,
+                      T: np.ndarray, sigma2: float) -> Tuple[np.ndarray, np.ndarray]:
+    """Return the motions ``(W (n, 3), T (n, 3))`` that the method publishes.
+
+    Each body's refit from ``W, T`` (the segmentation's, at noise ``sigma2`` px^2) on its
+    ``labels`` at :data:`PUBLISH_NOISE_SCALE` of that noise; bodies with fewer than 3 lines
+    or a non-finite refit, or all of them when it is None, keep ``W, T``.
+    """
+    W_pub, T_pub = W.copy(), T.copy()
+    if PUBLISH_NOISE_SCALE is None:
+        return W_pub, T_pub
+    s2 = sigma2 * PUBLISH_NOISE_SCALE
+    for b in range(W.shape[0]):                          # bodies, not lines
+        idx = np.flatnonzero(labels == b)
+        if idx.size >= 3:
+            w, t, _ = polish_body(obs, idx, W[b], T[b], POLISH_ITERATIONS, s2, s2)
+            if np.all(np.isfinite(w)) and np.all(np.isfinite(t)):
+                W_pub[b], T_pub[b] = w, t
+    return W_pub, T_pub
