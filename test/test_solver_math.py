@@ -18,12 +18,11 @@ import numpy as np
 import pytest
 from scenes import random_scene
 
-from mlofc_ros.solver.focal import unknown_f_rows_from_normals
+from mlofc_ros.solver.focal import relation_space, unknown_f_rows_from_normals
 from mlofc_ros.solver.gpca import algebraic_normals
 from mlofc_ros.solver.lines import (cayley_to_rotvec, line_flows, orthonormal_pair,
                                     rotation_matrix, rotvec_to_cayley, skew)
-from mlofc_ros.solver.veronese import (embed, exponents, gradient, relation_space,
-                                       structural_zeros)
+from mlofc_ros.solver.veronese import embed, exponents, gradient, structural_zeros
 
 
 RNG = np.random.default_rng(7)
@@ -178,13 +177,13 @@ def test_unknown_f_rows_lie_on_a_quartic():
 
 def _ksubspaces_naive(stats, n, labels, dof, max_iter=100):
     """K-subspaces with trimming as a plain loop (no cycle detection), the reference."""
-    from mlofc_ros.solver.ksubspaces import _reseed_empty, assign, trim_bound
+    from mlofc_ros.solver.ksubspaces import reseed_empty, assign, trim_bound
     from mlofc_ros.solver.models import fit_stats, quad_costs
     labels, steps = labels.copy(), 0
     for steps in range(1, max_iter + 1):
         c, _ = fit_stats(stats, labels, n)
         costs = quad_costs(stats, c)
-        new = _reseed_empty(assign(costs, trim_bound(costs, dof)), costs, n, 2)
+        new = reseed_empty(assign(costs, trim_bound(costs, dof)), costs, n, 2)
         if np.array_equal(new, labels):
             break
         labels = new
@@ -195,13 +194,12 @@ def _ksubspaces_naive(stats, n, labels, dof, max_iter=100):
 def test_ksubspaces_cycle_jump_gives_the_plain_loop_result(seed):
     # trimming makes these labellings cycle: the plain loop runs all 100 iterations, and the
     # cycle jump must end on exactly the same labels, c and costs
-    from mlofc_ros.solver.core import _check_tracks
     from mlofc_ros.solver.ksubspaces import ksubspaces
     from mlofc_ros.solver.models import track_stats
     from mlofc_tools.synthetic import add_outliers, make_scene
     sc = make_scene(2, 15, n_frames=5, noise_px=2.0, seed=seed)
     tracks, _ = add_outliers(sc.tracks, 0.3, np.random.default_rng(seed))
-    flows = line_flows(_check_tracks(tracks), sc.intrinsics)
+    flows = line_flows(np.asarray(tracks, dtype=np.float64), sc.intrinsics)
     stats, dof = track_stats(flows), 2.0 * flows.pairs_per_track()
     init = np.random.default_rng(seed).integers(-1, 2, tracks.shape[0])
     lab0, c0, costs0, steps = _ksubspaces_naive(stats, 2, init, dof)
