@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""ament_python setup for mlofc_ros.
+"""
+ament_python setup for mlofc_ros.
 
 ROS 2 itself (rclpy, message packages) is deliberately not in ``install_requires``: a colcon
 build on a real ROS install must never pip-pull ROS. Machines without ROS install the PyPI

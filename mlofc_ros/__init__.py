@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""mlofc_ros: 3D motion segmentation from straight-line optical flow.
+"""
+mlofc_ros: 3D motion segmentation from straight-line optical flow.
 
 Data flows one way, and so do the subpackages::
 

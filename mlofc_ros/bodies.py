@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Stable body ids over time.
+"""
+Stable body ids over time.
 
 The solver numbers its bodies arbitrarily in every window. :class:`BodyTracker` maps them onto
 stable ids: body ``i`` of this window gets the id its tracks were given most often over their
@@ -42,7 +43,8 @@ def _permutations(k: int, r: int) -> np.ndarray:
 
 
 def assign(score: np.ndarray) -> np.ndarray:
-    """Maximum-score assignment of rows to columns (exact up to 8 bodies and ids, or more).
+    """
+    Maximum-score assignment of rows to columns (exact up to 8 bodies and ids, or more).
 
     Parameters
     ----------
@@ -56,6 +58,7 @@ def assign(score: np.ndarray) -> np.ndarray:
         Ties go to the lexicographically smallest assignment (identity first).
 
     Problems with more than :data:`MAX_EXACT` candidate assignments fall back to a greedy one.
+
     """
     score = np.asarray(score, dtype=float)
     r, c = score.shape
@@ -91,13 +94,15 @@ def relabel(labels: np.ndarray, mapping: np.ndarray) -> np.ndarray:
 
 
 class BodyTracker:
-    """Give the solver's bodies ids that stay the same from window to window.
+    """
+    Give the solver's bodies ids that stay the same from window to window.
 
     Parameters
     ----------
     omega_weight : float
         Weight of angular-velocity similarity (in [0, 1]) against the shared-track fraction
         (in [0, 1]); shared tracks dominate, angular velocity decides when tracks were lost.
+
     """
 
     def __init__(self, omega_weight: float = 0.5) -> None:
@@ -133,7 +138,8 @@ class BodyTracker:
 
     def previous_labels(self, track_ids: np.ndarray,
                         max_age: Optional[int] = None) -> np.ndarray:
-        """Stable body id each track had in earlier windows (``-1`` when unknown), (N,) int64.
+        """
+        Stable body id each track had in earlier windows (``-1`` when unknown), (N,) int64.
 
         With ``max_age``, only labels the solver confirmed at most ``max_age`` updates ago.
         """
@@ -148,7 +154,8 @@ class BodyTracker:
                angular_velocities: np.ndarray,
                valid: Optional[np.ndarray] = None,
                positions: Optional[np.ndarray] = None) -> np.ndarray:
-        """Match this window's bodies to the stable ones and remember the result.
+        """
+        Match this window's bodies to the stable ones and remember the result.
 
         Parameters
         ----------
@@ -170,6 +177,7 @@ class BodyTracker:
         (n,) int64
             Stable id of every solver body (a permutation of ``0..n-1`` when the number of bodies
             does not change).
+
         """
         ids = np.asarray(track_ids, dtype=np.int64).ravel()
         lab = np.asarray(labels, dtype=np.int64).ravel()
@@ -210,7 +218,8 @@ class BodyTracker:
 
     def _score(self, ids: np.ndarray, lab: np.ndarray, w: np.ndarray, valid: np.ndarray,
                n: int) -> np.ndarray:
-        """(n, n_slots) score: shared-track fraction + omega_weight * omega similarity.
+        """
+        (n, n_slots) score: shared-track fraction + omega_weight * omega similarity.
 
         The shared-track fraction of body ``i`` and id ``j``: the mean, over the tracks of
         body ``i`` that have a history, of the share of that history spent with id ``j``.

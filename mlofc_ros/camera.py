@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Pinhole camera model with optional lens distortion, as carried by ``sensor_msgs/CameraInfo``.
+"""
+Pinhole camera model with optional lens distortion, as carried by ``sensor_msgs/CameraInfo``.
 
 Pixels are ``(u, v)`` (column, row); the camera optical frame is x right, y down, z forward.
 """
@@ -32,7 +33,8 @@ DISTORTION_MODELS = {
 
 @dataclass(frozen=True)
 class CameraModel:
-    """Intrinsics ``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (pixels) and distortion.
+    """
+    Intrinsics ``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (pixels) and distortion.
 
     ``d`` holds the ``sensor_msgs/CameraInfo.d`` coefficients of ``distortion_model``; empty or
     all-zero means no distortion.
@@ -68,7 +70,7 @@ class CameraModel:
 
     @property
     def has_distortion(self) -> bool:
-        """True when any distortion coefficient is non-zero."""
+        """Return whether any distortion coefficient is non-zero."""
         return any(x != 0.0 for x in self.d)
 
     @property
@@ -78,13 +80,14 @@ class CameraModel:
 
     @property
     def K(self) -> np.ndarray:  # noqa: N802 (the name every vision text uses)
-        """The 3x3 intrinsic matrix (float64)."""
+        """Return the 3x3 intrinsic matrix (float64)."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     @classmethod
     def from_camera_info(cls, k: Sequence[float], d: Sequence[float],
                          distortion_model: str) -> 'CameraModel':
-        """Build from ``CameraInfo`` fields ``k`` (9, row-major), ``d`` and ``distortion_model``.
+        """
+        Build from ``CameraInfo`` fields ``k`` (9, row-major), ``d`` and ``distortion_model``.
 
         Raises ``ValueError`` naming the problem (K all zeros or non-finite, wrong D length,
         unknown model with non-zero D).

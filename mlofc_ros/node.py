@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The ROS 2 node: a shell around :class:`mlofc_ros.pipeline.Pipeline`.
+"""
+The ROS 2 node: a shell around :class:`mlofc_ros.pipeline.Pipeline`.
 
 Topics (relative names, remap as usual)::
 
@@ -64,6 +65,14 @@ from typing import Any, Deque, Dict, List, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TwistWithCovarianceStamped
+from mlofc_ros import params as P
+from mlofc_ros.camera import CameraModel
+from mlofc_ros.image import image_msg_to_gray
+from mlofc_ros.messages.debug import draw_debug
+from mlofc_ros.pipeline import FrameResult, Observation, Pipeline
+from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
+                                    segments_msg, stamp_to_seconds, twist_msg)
+from mlofc_ros.solver import get_method
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
@@ -74,15 +83,6 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
-
-from mlofc_ros import params as P
-from mlofc_ros.camera import CameraModel
-from mlofc_ros.image import image_msg_to_gray
-from mlofc_ros.messages.debug import draw_debug
-from mlofc_ros.pipeline import FrameResult, Observation, Pipeline
-from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
-                                    segments_msg, stamp_to_seconds, twist_msg)
-from mlofc_ros.solver import get_method
 
 #: Reliable output QoS: keeps up to this many messages per topic for slow subscribers.
 OUTPUT_DEPTH = 10
@@ -124,7 +124,8 @@ def parameter_descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
 
 
 class MlofcNode(Node):
-    """Segment a camera stream into independently rotating rigid bodies (see module doc).
+    """
+    Segment a camera stream into independently rotating rigid bodies (see module doc).
 
     ``kwargs`` go to :class:`rclpy.node.Node` (namespace, parameter_overrides, context, ...).
     """

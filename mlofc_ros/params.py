@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The one parameter table of mlofc_ros.
+"""
+The one parameter table of mlofc_ros.
 
 The node declares these as ROS parameters (with descriptors and ranges built from this table),
 :class:`mlofc_ros.pipeline.Pipeline` takes them as keyword arguments, the bag tool exposes them as
@@ -49,7 +50,8 @@ def solver_methods() -> Tuple[str, ...]:
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """One parameter: its name, Python type, default, meaning and allowed values.
+    """
+    One parameter: its name, Python type, default, meaning and allowed values.
 
     Attributes
     ----------
@@ -70,6 +72,7 @@ class ParamSpec:
     scope : str
         ``'pipeline'`` (passed to :class:`~mlofc_ros.pipeline.Pipeline`) or ``'node'`` (the ROS
         shell only: queues, debug output).
+
     """
 
     name: str
@@ -190,7 +193,8 @@ def _type_name(t: type) -> str:
 
 
 def validate(name: str, value: Any) -> Optional[str]:
-    """Check one parameter value; return None when valid, else a reason a person can read.
+    """
+    Check one parameter value; return None when valid, else a reason a person can read.
 
     Integers are accepted for doubles (and converted by :func:`coerce`); booleans are not
     integers here. Unknown names are rejected.

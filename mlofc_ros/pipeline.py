@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The per-frame pipeline, without ROS: gray image in, segments, labels and body motions out.
+"""
+The per-frame pipeline, without ROS: gray image in, segments, labels and body motions out.
 
 Flow per frame: detect + track lines (:class:`~mlofc_ros.tracks.tracker.LineTracker`), undistort
 their endpoints (when the camera has distortion), push them into a sliding
@@ -34,8 +35,6 @@ import statistics
 import time
 from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Set, Tuple
 
-import numpy as np
-
 from mlofc_ros import params as _params
 from mlofc_ros.bodies import BodyTracker, relabel
 from mlofc_ros.camera import as_camera, CameraLike, CameraModel
@@ -45,6 +44,7 @@ from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_ros.tracks.undistort import undistort_segments
 from mlofc_ros.tracks.window import TrackWindow
+import numpy as np
 
 #: Keys of :attr:`FrameResult.timings` (milliseconds; ``detect``: the line detector alone, 0
 #: in the frames it does not run, part of ``detect_track``).
@@ -70,7 +70,8 @@ WARM_FLOOR_SOLVES = 10
 
 @dataclass
 class FrameResult:
-    """What :meth:`Pipeline.process` returns for one frame.
+    """
+    What :meth:`Pipeline.process` returns for one frame.
 
     Attributes
     ----------
@@ -116,6 +117,7 @@ class FrameResult:
         frame, from the undistorted segment and the intrinsics of this frame (the camera's, the
         ``focal_length`` parameter, or the estimated focal length with the principal point at
         the image centre); NaN while the focal length is not known.
+
     """
 
     stamp: float
@@ -138,13 +140,14 @@ class FrameResult:
 
     @property
     def solved(self) -> bool:
-        """True when at least one body has a valid angular velocity."""
+        """Return whether at least one body has a valid angular velocity."""
         return bool(np.any(self.body_valid))
 
 
 @dataclass
 class Observation:
-    """One frame tracked and added to the window, not yet solved (:meth:`Pipeline.observe`).
+    """
+    One frame tracked and added to the window, not yet solved (:meth:`Pipeline.observe`).
 
     Attributes
     ----------
@@ -183,6 +186,7 @@ class Observation:
         The frame was not processed (duplicate stamp): nothing to solve or publish.
     undistorted : (M, 4) float64 or None
         ``segments`` undistorted (None: the same as ``segments``, no distortion).
+
     """
 
     stamp: float
@@ -212,7 +216,8 @@ class Observation:
                    False, [problem], {}, skipped=True)
 
     def replacing(self, older: 'Observation') -> 'Observation':
-        """Return this observation with the resets and problems of ``older`` (dropped unsolved).
+        """
+        Return this observation with the resets and problems of ``older`` (dropped unsolved).
 
         A solve-side reset (a restart of the tracker, a bag loop) must not be lost with the
         observation that carried it.
@@ -222,7 +227,8 @@ class Observation:
 
 
 class _WarmStarts:
-    """What the solves of a stream hand to the next one: the solver's warm start.
+    """
+    What the solves of a stream hand to the next one: the solver's warm start.
 
     Per stable body id the last motion the labels were made with (methods whose warm start
     is :attr:`WarmStart.MOTIONS`), and the lowered ``warm_inliers`` after a search
@@ -240,7 +246,8 @@ class _WarmStarts:
         self.floor = None
 
     def keywords(self, method: Method, labels: Optional[np.ndarray], n: int) -> Dict[str, Any]:
-        """Return the keywords of :func:`segment_lines` for a solve by ``method`` of n bodies.
+        """
+        Return the keywords of :func:`segment_lines` for a solve by ``method`` of n bodies.
 
         ``labels``: the previous stable body id of every track of the window (``-1`` none),
         None when there is no warm start (``num_bodies`` automatic).
@@ -323,7 +330,8 @@ def _lookup(keys: np.ndarray, table_keys: np.ndarray, table_values: np.ndarray,
 
 
 def check_lines(track_ids: Any, segments: Any) -> Tuple[np.ndarray, np.ndarray]:
-    """Validate one frame of line tracks: ``(ids (M,) uint32, segments (M, 4) float32)``.
+    """
+    Validate one frame of line tracks: ``(ids (M,) uint32, segments (M, 4) float32)``.
 
     ``track_ids`` integers in ``[0, 2**32)``, unique; ``segments (M, 4)`` px, finite, each
     longer than 1e-3 px. Raises ``ValueError`` naming the first problem.
@@ -372,7 +380,8 @@ def make_tracker(params: Mapping[str, Any]) -> LineTracker:
 
 
 class Pipeline:
-    """Sliding-window motion segmentation of a gray image stream.
+    """
+    Sliding-window motion segmentation of a gray image stream.
 
     Keyword parameters are those of :mod:`mlofc_ros.params` (the node's ROS parameters, same
     names and defaults); node-only ones (``queue_size``, ...) are accepted and ignored. Invalid
@@ -414,7 +423,8 @@ class Pipeline:
     # --- configuration -------------------------------------------------------------------
 
     def reconfigure(self, **kwargs: Any) -> None:
-        """Change parameters at run time; resets only what the change invalidates.
+        """
+        Change parameters at run time; resets only what the change invalidates.
 
         ``window`` restarts the window; ``num_bodies`` restarts body numbering;
         ``min_segment_length`` restarts the tracker and the window; ``detect_every``,
@@ -443,7 +453,8 @@ class Pipeline:
             self._warm.reset()
 
     def reset(self) -> None:
-        """Forget all state (tracks, window, body ids, stamps), as at construction.
+        """
+        Forget all state (tracks, window, body ids, stamps), as at construction.
 
         After a reset the pipeline takes images (:meth:`observe`) or line tracks
         (:meth:`observe_lines`) afresh.
@@ -468,7 +479,8 @@ class Pipeline:
         self._stamps.clear()
 
     def _restart_tracks(self) -> None:
-        """Restart the tracker and the window.
+        """
+        Restart the tracker and the window.
 
         The solve side forgets the track ids when it gets an observation whose resets hold
         ``'tracks'``: the caller adds it.
@@ -525,7 +537,8 @@ class Pipeline:
 
     def process(self, gray: np.ndarray, stamp_seconds: float,
                 camera: CameraLike = None) -> FrameResult:
-        """Process one frame and return the newest frame's segmentation.
+        """
+        Process one frame and return the newest frame's segmentation.
 
         Parameters
         ----------
@@ -543,12 +556,14 @@ class Pipeline:
         An exception from the line tracker propagates after the tracks are restarted.
 
         The same as ``solve(observe(gray, stamp_seconds, camera))``.
+
         """
         return self.solve(self.observe(gray, stamp_seconds, camera))
 
     def observe(self, gray: np.ndarray, stamp_seconds: float,
                 camera: CameraLike = None, dropped: int = 0) -> Observation:
-        """Track the lines of one frame and add them to the window; do not solve.
+        """
+        Track the lines of one frame and add them to the window; do not solve.
 
         Arguments and errors as :meth:`process`. ``dropped`` is the number of frames the caller
         received since the previous one and did not pass on (the node's full queue): their
@@ -567,7 +582,8 @@ class Pipeline:
 
     def observe_lines(self, track_ids: np.ndarray, segments: np.ndarray, stamp_seconds: float,
                       image_size: Tuple[int, int], camera: CameraLike = None) -> Observation:
-        """Add one frame of line segments from your own tracker to the window; do not solve.
+        """
+        Add one frame of line segments from your own tracker to the window; do not solve.
 
         For a stream whose lines are detected and tracked elsewhere (another front end, or
         point tracks paired into lines): everything after the tracker is the same as for
@@ -592,6 +608,7 @@ class Pipeline:
         Raises ``ValueError`` for malformed lines, a bad image size or camera, or when this
         pipeline has observed images (its tracker's ids would mix with yours; :meth:`reset`
         first). Stamps are handled as in :meth:`observe`.
+
         """
         t0 = time.perf_counter()
         ids, seg = check_lines(track_ids, segments)
@@ -601,7 +618,8 @@ class Pipeline:
 
     def process_lines(self, track_ids: np.ndarray, segments: np.ndarray, stamp_seconds: float,
                       image_size: Tuple[int, int], camera: CameraLike = None) -> FrameResult:
-        """``solve(observe_lines(...))``: segment a stream of your own line tracks, frame by frame.
+        """
+        ``solve(observe_lines(...))``: segment a stream of your own line tracks, frame by frame.
 
         Arguments and errors as :meth:`observe_lines`; the result as :meth:`process` (its
         ``segments`` and ``track_ids`` are the ones given).
@@ -675,7 +693,8 @@ class Pipeline:
 
     def _check_stamp(self, stamp: float, problems: List[str], resets: Set[str],
                      dropped: int = 0) -> bool:
-        """Check the stamp against the last frame's; False for a duplicate (skip the frame).
+        """
+        Check the stamp against the last frame's; False for a duplicate (skip the frame).
 
         A stamp that went back (a bag loop, a clock reset) restarts the tracks and the body
         ids; a gap over ``max_frame_gap`` frame intervals beyond the ``dropped`` frames the
@@ -740,7 +759,8 @@ class Pipeline:
 
     def _push(self, track_ids: np.ndarray, corrected: np.ndarray, stamp: float
               ) -> Tuple[np.ndarray, np.ndarray]:
-        """Add the frame's (undistorted) segments to the window; its tracks ``(ids, (N, K, 4))``.
+        """
+        Add the frame's (undistorted) segments to the window; its tracks ``(ids, (N, K, 4))``.
 
         Tracks seen in at least ``min_track_frames`` frames (or every frame of a shorter
         window, and at least 2).
@@ -761,7 +781,8 @@ class Pipeline:
         return float(statistics.median([b - a for a, b in zip(stamps, stamps[1:])]))
 
     def solve(self, obs: Observation) -> FrameResult:
-        """Segment the window of ``obs`` (from :meth:`observe`) and return the frame's result.
+        """
+        Segment the window of ``obs`` (from :meth:`observe`) and return the frame's result.
 
         Call from one thread at a time, in the order of the observations; it may run alongside
         :meth:`observe` of later frames.
@@ -807,7 +828,8 @@ class Pipeline:
             self._forget_focal()
 
     def _segment(self, obs: Observation, problems: List[str]) -> Optional[SegmentationResult]:
-        """Run the solver on the window of ``obs``; None (and why in ``problems``) if it did not.
+        """
+        Run the solver on the window of ``obs``; None (and why in ``problems``) if it did not.
 
         The ``method`` parameter's method, or its stand-in while the window holds too few
         frames, warm-started from the previous solves.
@@ -844,7 +866,8 @@ class Pipeline:
                 'angular_covariances': c, 'body_valid': v, 'carried': np.zeros(m, dtype=bool)}
 
     def _publish(self, obs: Observation, res: SegmentationResult) -> Dict[str, Any]:
-        """Return the per-segment and per-body fields of a solved frame, by stable body id.
+        """
+        Return the per-segment and per-body fields of a solved frame, by stable body id.
 
         Rotations in rad/s (the window's median frame interval); the body ids follow the
         motions the labels were made with (``segmentation_angular_velocities``), the published
@@ -882,7 +905,8 @@ class Pipeline:
 
     def _segment_labels(self, obs: Observation, labels: np.ndarray, mapping: np.ndarray
                         ) -> Tuple[np.ndarray, np.ndarray]:
-        """Stable body id of every segment of the frame, and where it was carried over.
+        """
+        Stable body id of every segment of the frame, and where it was carried over.
 
         A segment whose track the solve left unassigned keeps the id it was last assigned for
         up to ``label_memory`` frames.

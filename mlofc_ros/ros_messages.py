@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Build and parse the ROS messages of mlofc_ros (needs the message packages, not rclpy).
+"""
+Build and parse the ROS messages of mlofc_ros (needs the message packages, not rclpy).
 
 - ``~/segments``: ``sensor_msgs/PointCloud2``, one point per line segment of the newest frame,
   with the layout of :data:`mlofc_ros.messages.segments.SEGMENT_FIELDS` (x, y, z the viewing
@@ -33,14 +34,13 @@ from typing import Optional, Tuple
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import TwistWithCovarianceStamped
-import numpy as np
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
-from std_msgs.msg import Header
-
 from mlofc_ros.camera import CameraModel
 from mlofc_ros.messages.images import bgr8_fields
 from mlofc_ros.messages.segments import (segment_cloud_fields, SEGMENT_FIELDS,
                                          SEGMENT_POINT_STEP, unpack_segments)
+import numpy as np
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
+from std_msgs.msg import Header
 
 #: Variance ((m/s)^2) on the diagonal of the linear part of every twist covariance: the
 #: rotation-only model does not observe translation, so it is marked as unknown.
@@ -64,7 +64,8 @@ def segment_fields() -> list:
 def segments_msg(header: Header, segments: np.ndarray, track_ids: np.ndarray,
                  labels: np.ndarray, residuals: np.ndarray,
                  rays: Optional[np.ndarray] = None) -> PointCloud2:
-    """Build the ``~/segments`` cloud: one point per segment, in the given order.
+    """
+    Build the ``~/segments`` cloud: one point per segment, in the given order.
 
     Parameters
     ----------
@@ -73,6 +74,7 @@ def segments_msg(header: Header, segments: np.ndarray, track_ids: np.ndarray,
     segments : (M, 4) float
         ``x1, y1, x2, y2`` endpoints in pixels, as seen in the (distorted) image.
     track_ids : (M,) uint32
+        Persistent track id of every segment.
     labels : (M,) int
         Stable body id of every segment, -1 unassigned.
     residuals : (M,) float
@@ -82,6 +84,7 @@ def segments_msg(header: Header, segments: np.ndarray, track_ids: np.ndarray,
         (:attr:`mlofc_ros.pipeline.FrameResult.rays`); None or NaN rows = not known.
 
     The cloud is ``is_dense`` when every ray is known (NaN residual = not solved).
+
     """
     f = segment_cloud_fields(segments, track_ids, labels, residuals, rays)
     msg = PointCloud2()
@@ -98,7 +101,8 @@ def segments_msg(header: Header, segments: np.ndarray, track_ids: np.ndarray,
 
 
 def parse_segments_msg(msg: PointCloud2) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Parse a ``~/segments`` cloud into ``(segments (M,4), track_ids, labels, residuals)``.
+    """
+    Parse a ``~/segments`` cloud into ``(segments (M,4), track_ids, labels, residuals)``.
 
     Raises ``ValueError`` when the field layout is not the one of ``SEGMENT_FIELDS``.
     :func:`parse_segment_rays` reads the ``x y z`` rays.
@@ -128,7 +132,8 @@ def _unpack_segments_msg(msg: PointCloud2) -> np.ndarray:
 
 def twist_msg(header: Header, angular_velocity: np.ndarray,
               angular_covariance: np.ndarray) -> TwistWithCovarianceStamped:
-    """Build a body twist.
+    """
+    Build a body twist.
 
     Parameters
     ----------
@@ -142,6 +147,7 @@ def twist_msg(header: Header, angular_velocity: np.ndarray,
         becomes 0 with an ``inf`` variance.
 
     The linear part is 0 with :data:`LINEAR_UNKNOWN_VARIANCE` on its diagonal.
+
     """
     w = np.asarray(angular_velocity, dtype=float).reshape(3)
     c = np.asarray(angular_covariance, dtype=float).reshape(3, 3)
@@ -179,7 +185,8 @@ def debug_image_msg(header: Header, bgr: np.ndarray) -> Image:
 
 
 def camera_model_from_info(msg: CameraInfo) -> CameraModel:
-    """Return the :class:`CameraModel` of the images that go with ``msg``.
+    """
+    Return the :class:`CameraModel` of the images that go with ``msg``.
 
     ``k``, ``d`` and ``distortion_model`` come from the message; binning and a region of interest
     (REP 104) are folded into the intrinsics so the model applies to the published image pixels.

@@ -39,11 +39,10 @@ import tempfile
 import time
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
-
 from mlofc_tools.bench import common
 from mlofc_tools.demo_node import (Collected, DemoConfig, DemoError, FrameOutput,  # noqa: F401
                                    IMAGE_TOPIC, INFO_TOPIC, run_node)
+import numpy as np
 
 #: A detected segment matches a true edge when both its endpoints lie within this many pixels
 #: of the edge (point-to-segment distance).
@@ -312,7 +311,8 @@ def _parser() -> argparse.ArgumentParser:
                    help='seconds to wait for the node to answer a frame (default 30)')
     p.add_argument('--startup-timeout', type=float, default=60.0,
                    help='seconds to wait for the node to subscribe (default 60)')
-    p.add_argument('--domain-id', type=int, help='ROS domain id (default: ROS_DOMAIN_ID, else a random one)')
+    p.add_argument('--domain-id', type=int,
+                   help='ROS domain id (default: ROS_DOMAIN_ID, else a random one)')
     return p
 
 

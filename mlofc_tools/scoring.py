@@ -44,6 +44,7 @@ def best_permutation(pred: np.ndarray, truth: np.ndarray, n_bodies: int
         ``perm[p]`` is the true body matched to predicted body ``p``.
     errors : int
         Misclassified lines under ``perm``.
+
     """
     pred = np.asarray(pred, dtype=np.int64)
     truth = np.asarray(truth, dtype=np.int64)
@@ -71,9 +72,12 @@ def motion_errors(est: np.ndarray, truth: np.ndarray, perm: Sequence[int]
 
     Parameters
     ----------
-    est : (n, 3) estimated rotation vectors (rad/frame), row ``p`` = predicted body ``p``.
-    truth : (n, 3) true rotation vectors (rad/frame).
-    perm : ``perm[p]`` is the true body of predicted body ``p`` (:func:`best_permutation`).
+    est
+        (n, 3) estimated rotation vectors (rad/frame), row ``p`` = predicted body ``p``.
+    truth
+        (n, 3) true rotation vectors (rad/frame).
+    perm
+        ``perm[p]`` is the true body of predicted body ``p`` (:func:`best_permutation`).
 
     Returns
     -------
@@ -82,6 +86,7 @@ def motion_errors(est: np.ndarray, truth: np.ndarray, perm: Sequence[int]
         NaN when none does.
     absolute_deg : float
         Mean of ``|w_est - w_true|`` over all bodies, in degrees per frame.
+
     """
     est = np.asarray(est, dtype=np.float64)
     truth = np.asarray(truth, dtype=np.float64)

@@ -76,6 +76,7 @@ class SyntheticScene:
         Standard deviation of the Gaussian noise added to each endpoint coordinate (pixels).
     reference_frame : int
         The frame in which the lines were sampled (depth range and image lengths hold there).
+
     """
 
     tracks: np.ndarray
@@ -91,12 +92,12 @@ class SyntheticScene:
 
     @property
     def n_bodies(self) -> int:
-        """Number of bodies ``n``."""
+        """Return the number of bodies ``n``."""
         return int(self.angular_velocities.shape[0])
 
     @property
     def n_frames(self) -> int:
-        """Number of frames ``K``."""
+        """Return the number of frames ``K``."""
         return int(self.tracks.shape[1])
 
     @property
@@ -119,6 +120,7 @@ def rotation_matrices(rotvecs: np.ndarray) -> np.ndarray:
     -------
     (..., 3, 3) float64
         Rotation matrices.
+
     """
     w = np.asarray(rotvecs, dtype=np.float64)
     theta = np.linalg.norm(w, axis=-1)[..., None, None]
@@ -156,14 +158,19 @@ def _frame_poses(w: np.ndarray, t: np.ndarray, n_frames: int, ref: int
 
     Parameters
     ----------
-    w : (n, 3) rotation vectors (rad/frame).
-    t : (n, 3) translations (units/frame).
-    n_frames : K.
-    ref : index of the reference frame.
+    w
+        (n, 3) rotation vectors (rad/frame).
+    t
+        (n, 3) translations (units/frame).
+    n_frames
+        K.
+    ref
+        Index of the reference frame.
 
     Returns
     -------
     rots : (n, K, 3, 3), trans : (n, K, 3)
+
     """
     steps = np.arange(n_frames) - ref
     rots = rotation_matrices(w[:, None, :] * steps[None, :, None])
@@ -191,13 +198,31 @@ def _sample_body_lines(rng: np.random.Generator, count: int, rots: np.ndarray,
 
     Parameters
     ----------
-    rots : (K, 3, 3), trans : (K, 3)
-        Pose of each frame relative to the reference frame (see :func:`_frame_poses`).
+    rng : numpy Generator
+        Draws the segments.
+    count : int
+        Number of segments wanted.
+    rots : (K, 3, 3) float
+        Rotation of each frame relative to the reference frame (see :func:`_frame_poses`).
+    trans : (K, 3) float
+        Translation of each frame relative to the reference frame.
+    kmat : (3, 3) float
+        Intrinsic matrix.
+    image_size : (int, int)
+        ``(width, height)`` in pixels; every endpoint must project inside in every frame.
+    depth : (float, float)
+        Range of the segments' depths in the reference frame (scene units).
+    seg_length_px : (float, float)
+        Range of the segments' projected lengths in the reference frame (pixels).
+    slide : float
+        Each endpoint moves along the 3D line by up to this share of the segment, independently
+        in every frame (line tracks, not point tracks).
 
     Returns
     -------
     (count, K, 2, 3) float64
         Segment endpoints in the camera frame at every frame (units).
+
     """
     w_img, h_img = image_size
     kinv = np.linalg.inv(kmat)
@@ -341,6 +366,7 @@ def make_scene(n_bodies: int, lines_per_body: Union[int, Sequence[int]], n_frame
     ------
     ValueError
         On invalid arguments, or when no segment stays visible under the requested motion.
+
     """
     counts = np.broadcast_to(np.asarray(lines_per_body, dtype=np.int64), (n_bodies,))
     _check_scene_args(n_bodies, counts, lines_per_body, n_frames, noise_px, translation_ratio,
@@ -392,7 +418,9 @@ def add_outliers(tracks: np.ndarray, fraction: float, rng: np.random.Generator,
     fraction : float
         Fraction of the tracks to replace (rounded to a whole number of tracks).
     rng : numpy Generator
+        Draws the outliers.
     mix : {'mixed', 'jitter', 'stitched'}
+        Kinds of outliers (above).
 
     Returns
     -------
@@ -400,6 +428,7 @@ def add_outliers(tracks: np.ndarray, fraction: float, rng: np.random.Generator,
         A copy with the outliers in place.
     kind : (N,) int64
         0 = inlier (unchanged), 1 = jitter outlier, 2 = stitched outlier.
+
     """
     src = np.asarray(tracks, dtype=np.float64)
     n_tracks, n_frames = src.shape[:2]

@@ -20,6 +20,8 @@ import time
 from typing import Callable, Dict, List
 
 from ament_index_python.packages import get_package_prefix, PackageNotFoundError
+from mlofc_ros.image.decode import gray_to_image_fields
+from mlofc_ros.ros_messages import stamp_to_seconds
 import numpy as np
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import GetParameters, SetParameters
@@ -28,9 +30,6 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
-
-from mlofc_ros.image.decode import gray_to_image_fields
-from mlofc_ros.ros_messages import stamp_to_seconds
 
 FRAME_ID = 'camera_optical_frame'
 PACKAGE = 'mlofc_ros'
@@ -104,7 +103,8 @@ class DdsHarness:
         return box
 
     def camera_publishers(self, ns: str, timeout: float = None):
-        """Create publishers of ``{ns}/image`` and ``{ns}/camera_info`` (sensor-data QoS).
+        """
+        Create publishers of ``{ns}/image`` and ``{ns}/camera_info`` (sensor-data QoS).
 
         Returned once the node under test (``{ns}/mlofc``) subscribes to both and publishes
         ``~/segments``.

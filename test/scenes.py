@@ -12,14 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Small self-contained scene generator for solver tests (independent of mlofc_tools.synthetic)."""
-import numpy as np
-
 from mlofc_ros.solver.lines import rotation_matrix
+import numpy as np
 
 
 def random_scene(n_bodies, lines_per_body, n_frames=2, noise=0.0, f=1000.0, size=1000,
                  deg=(2.0, 6.0), seed=0, vertical=0, own_centre=False):
-    """Make bodies rotating about the camera centre (or their own centre).
+    """
+    Make bodies rotating about the camera centre (or their own centre).
 
     Returns tracks, labels, rotation vectors per frame and intrinsics.
     """

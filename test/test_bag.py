@@ -14,7 +14,6 @@
 
 """Bag tools: rosbag2 round trips (mcap, sqlite3), ``mlofc_bag`` end to end, ``mlofc_play``."""
 import os
-from pathlib import Path
 import shutil
 import signal
 import subprocess
@@ -24,13 +23,12 @@ import time
 from types import SimpleNamespace
 
 from dds import executable
-import numpy as np
-import pytest
-
 from mlofc_ros.bag import BagError, BagReader, BagWriter, write_image_bag
 from mlofc_ros.bag.bagfile import CAMERA_INFO_TYPE, deserialize, IMAGE_TYPE, message_class
 from mlofc_ros.bag.offline import main as bag_main, parse_param
 from mlofc_ros.camera import CameraModel
+import numpy as np
+import pytest
 
 # the bag tools are the ROS shell (rosbags, message classes): not for a run without ROS
 pytestmark = pytest.mark.ros

@@ -15,10 +15,9 @@
 """Smoke test of ``python -m mlofc_tools.bench accuracy --quick`` and its statistics."""
 import pathlib
 
+from mlofc_tools.bench import accuracy, accuracy_report
 import numpy as np
 import pytest
-
-from mlofc_tools.bench import accuracy, accuracy_report
 
 SECTION_TITLES = (
     '## Goals',

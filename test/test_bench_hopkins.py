@@ -14,11 +14,10 @@
 """The Hopkins155 benchmarks: windows, options, quick runs, the warm path on a real stream."""
 import pathlib
 
-import numpy as np
-import pytest
-
 from mlofc_tools.bench import hopkins as bench, hopkins_report, hopkins_runs
 from mlofc_tools.datasets import hopkins as hk
+import numpy as np
+import pytest
 
 DATA = hk.DEFAULT_DATA_DIR
 pytestmark = pytest.mark.skipif(not (DATA / '1R2RC.npz').is_file(),
@@ -66,7 +65,8 @@ def test_quick_benchmark(tmp_path: pathlib.Path) -> None:
 
 
 def test_general_diagnostics_plumbing() -> None:
-    """The search-or-model check reruns the method's own search.
+    """
+    The search-or-model check reruns the method's own search.
 
     Given the method's answer as the 'truth', it is never cheaper than the search restarted
     from that answer (the same computation).

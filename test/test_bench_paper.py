@@ -13,9 +13,8 @@
 # limitations under the License.
 
 """Smoke test of ``python -m mlofc_tools.bench paper --quick`` and the report helpers."""
-import pytest
-
 from mlofc_tools.bench import common
+import pytest
 
 
 def test_markdown_table():

@@ -16,10 +16,9 @@ import os
 import pathlib
 import tempfile
 
+from mlofc_tools.bench import pipeline, soak
 import numpy as np
 import pytest
-
-from mlofc_tools.bench import pipeline, soak
 
 
 def test_pipeline_quick_writes_report(tmp_path: pathlib.Path) -> None:

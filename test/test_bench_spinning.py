@@ -14,10 +14,9 @@
 """Scoring of ``python -m mlofc_tools.bench spinning`` on hand-made frames (no rendering)."""
 from types import SimpleNamespace
 
-import numpy as np
-
 from mlofc_tools.bench import __main__ as dispatcher
 from mlofc_tools.bench import spinning
+import numpy as np
 
 
 def _scene():

@@ -15,9 +15,9 @@
 import pathlib
 
 from mlofc_ros import params
+from mlofc_ros.pipeline import make_tracker
 from mlofc_tools.bench import tradeoff
 from mlofc_tools.bench.__main__ import BENCHMARKS
-from mlofc_ros.pipeline import make_tracker
 
 
 def test_make_tracker_follows_the_node_parameters() -> None:

@@ -17,10 +17,9 @@ import re
 import subprocess
 import sys
 
+from mlofc_tools import demo, demo_node
 import numpy as np
 import pytest
-
-from mlofc_tools import demo, demo_node
 
 
 def test_match_segments_accepts_parts_of_edges():

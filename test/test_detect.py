@@ -13,13 +13,12 @@
 # limitations under the License.
 """LineDetector: finds rendered GT edges, drops short segments, merges collinear fragments."""
 import cv2
-import numpy as np
-import pytest
-
 from mlofc_ros.segments.bridge import HOUGH_BINS
 from mlofc_ros.segments.detect import (bridge_crossings, LineDetector, merge_collinear,
                                        orient_by_polarity)
 from mlofc_ros.segments.merge import rows_not_in
+import numpy as np
+import pytest
 
 
 def _on_line(seg, gt, angle_deg=3.0, dist_px=2.0):

@@ -17,9 +17,6 @@ import time
 import types
 
 import cv2
-import numpy as np
-import pytest
-
 from mlofc_ros.image import (
     gray_to_image_fields,
     image_msg_to_gray,
@@ -27,6 +24,8 @@ from mlofc_ros.image import (
     SUPPORTED_ENCODINGS,
     WRITABLE_ENCODINGS,
 )
+import numpy as np
+import pytest
 
 H, W = 24, 34
 RNG = np.random.default_rng(1234)
@@ -36,7 +35,8 @@ ALL_NAMES = sorted(SUPPORTED_ENCODINGS)
 
 
 def raw_fields(pixels, encoding, is_bigendian=False, pad=0):
-    """Build Image fields by hand from ``(H, W)`` / ``(H, W, C)`` wire-layout pixels.
+    """
+    Build Image fields by hand from ``(H, W)`` / ``(H, W, C)`` wire-layout pixels.
 
     Independent of the library: numpy byte order + explicit zero padding per row.
     """

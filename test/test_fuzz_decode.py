@@ -16,9 +16,8 @@ import array
 
 from hypothesis import given
 from hypothesis import HealthCheck, settings, strategies as st
-import numpy as np
-
 from mlofc_ros.image import image_to_gray, SUPPORTED_ENCODINGS
+import numpy as np
 
 ENCODINGS = sorted(SUPPORTED_ENCODINGS)
 BOGUS = ['', 'jpeg', 'MONO8', 'mono', 'bgr', 'bayer_rggb16', 'yuv420', '32FC3', '8UC3',
@@ -58,7 +57,8 @@ LENGTH_ERRORS = [0] * 12 + [-2, -1, 1, 5]
 
 
 def near_valid_case(encoding: str, bits: int):
-    """Small header that is right or off by a little, with a payload of about the right size.
+    """
+    Small header that is right or off by a little, with a payload of about the right size.
 
     Every choice is a bit field of ``bits`` (so hypothesis makes only two draws per example,
     keeping its per-example cost low, and shrinks towards small headers); the payload

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Fuzz segment_lines: any input gives a well-formed result or a ValueError, nothing else.
+"""
+Fuzz segment_lines: any input gives a well-formed result or a ValueError, nothing else.
 
 Budgets (>= 10,000 solver calls in all, well under a minute): malformed inputs of every kind
 (2000 examples x 5 methods, ~9000 calls, fast: rejected by the argument checks), edge floats
@@ -25,10 +26,9 @@ import warnings
 
 from hypothesis import given, HealthCheck, settings, strategies as st
 from hypothesis.extra import numpy as hnp
+from mlofc_ros.solver import get_method, METHODS, segment_lines
 import numpy as np
 import pytest
-
-from mlofc_ros.solver import get_method, METHODS, segment_lines
 
 CHEAP_METHODS = [m for m in METHODS if m != 'general']
 FUZZ = {'deadline': None, 'database': None, 'print_blob': True,

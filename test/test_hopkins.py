@@ -14,10 +14,9 @@
 """Hopkins155 line tracks: loading and point pairing."""
 import pathlib
 
+from mlofc_tools.datasets import hopkins as hk
 import numpy as np
 import pytest
-
-from mlofc_tools.datasets import hopkins as hk
 
 DATA = hk.DEFAULT_DATA_DIR
 pytestmark = pytest.mark.skipif(not (DATA / '1R2RC.npz').is_file(),

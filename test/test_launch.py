@@ -16,10 +16,9 @@
 import importlib.util
 from pathlib import Path
 
+from mlofc_ros import params as P
 import pytest
 import yaml
-
-from mlofc_ros import params as P
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / 'config' / 'mlofc.yaml'

@@ -12,11 +12,10 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Line flows against straightforward per-track references (dense Cholesky, stacked 3x3s)."""
-import numpy as np
-import pytest
-
 from mlofc_ros.solver.lines import interpretation_normals, line_flows, whiten_tracks
 from mlofc_tools.synthetic import make_scene
+import numpy as np
+import pytest
 
 
 def dense_whiten(n_tracks, n_slots, ti, ki, E, cov0, cov1, M, b):

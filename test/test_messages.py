@@ -12,9 +12,6 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Segment cloud packing (also via real sensor_msgs serialization), image fields, debug view."""
-import numpy as np
-import pytest
-
 from mlofc_ros.image import image_to_gray
 from mlofc_ros.messages import (
     bgr8_fields,
@@ -29,6 +26,8 @@ from mlofc_ros.messages import (
     SEGMENT_POINT_STEP,
     unpack_segments,
 )
+import numpy as np
+import pytest
 
 RNG = np.random.default_rng(7)
 

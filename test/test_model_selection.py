@@ -15,12 +15,11 @@
 """Model selection's score on degenerate inputs: no numpy warning, a defined value."""
 import warnings
 
-import numpy as np
-
 from mlofc_ros.solver.model_selection import bic_score
 from mlofc_ros.solver.models import chi2_quantile
 from mlofc_ros.solver.result import SegmentationResult
 from mlofc_ros.solver.robust import OUTLIER_P
+import numpy as np
 
 
 def _result(costs, labels):

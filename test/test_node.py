@@ -23,14 +23,6 @@ from typing import Dict, List
 
 from dds import DdsHarness, executable, FRAME_ID, image_msg, stamp_of
 from geometry_msgs.msg import TwistWithCovarianceStamped
-import numpy as np
-import pytest
-from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
-from test_pipeline import (evaluate, GOAL_MISCLASSIFIED, GOAL_OMEGA_ERROR, small_sequence,
-                           two_box_sequence)
-
 from mlofc_ros import params as P
 from mlofc_ros.camera import CameraModel
 from mlofc_ros.messages.segments import SEGMENT_FIELDS
@@ -39,6 +31,13 @@ from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info,
                                     LINEAR_UNKNOWN_VARIANCE, parse_segment_rays,
                                     parse_segments_msg, parse_twist_msg, segments_msg, twist_msg)
 from mlofc_ros.tracks.undistort import undistort_segments
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from test_pipeline import (evaluate, GOAL_MISCLASSIFIED, GOAL_OMEGA_ERROR, small_sequence,
+                           two_box_sequence)
 
 
 pytestmark = pytest.mark.ros
@@ -217,8 +216,11 @@ def test_in_process_two_boxes_one_cloud_per_image_and_accuracy(ros):
 
 @pytest.mark.slow
 def test_in_process_slow_solver_tracks_every_frame_and_solves_the_newest(ros):
-    """A solver slower than the camera (as method general is): every frame is still tracked,
-    the solver takes the newest window, the frames it had no time for are counted."""
+    """
+    Track every frame with a solver slower than the camera (as method general is).
+
+    The solver takes the newest window; the frames it had no time for are counted.
+    """
     seq = two_box_sequence(24)
     node = MlofcNode(namespace='/slow', parameter_overrides=[
         Parameter('num_bodies', value=3), Parameter('queue_size', value=30)])

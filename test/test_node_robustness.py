@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Bad input never takes the node down: images, camera_info, stamps, scenes, parameters.
+"""
+Bad input never takes the node down: images, camera_info, stamps, scenes, parameters.
 
 Every test runs MlofcNode in process next to a test node over real DDS; warnings are read from
 ``/rosout`` as any ROS tool would see them, the node's health from ``/diagnostics``.
@@ -25,6 +26,10 @@ import cv2
 from dds import DdsHarness, FRAME_ID, image_msg, stamp, stamp_of
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import TwistWithCovarianceStamped
+from mlofc_ros import pipeline as pipeline_module
+from mlofc_ros.image import image_msg_to_gray
+from mlofc_ros.node import MlofcNode
+from mlofc_ros.ros_messages import parse_segments_msg, parse_twist_msg, stamp_to_seconds
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Log
@@ -32,11 +37,6 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from test_pipeline import small_sequence
-
-from mlofc_ros import pipeline as pipeline_module
-from mlofc_ros.image import image_msg_to_gray
-from mlofc_ros.node import MlofcNode
-from mlofc_ros.ros_messages import parse_segments_msg, parse_twist_msg, stamp_to_seconds
 
 pytestmark = pytest.mark.ros
 
@@ -139,7 +139,7 @@ def harness(ros, request):
 
 
 def bad_images(good: np.ndarray):
-    """(what, Image, words the warning must contain) for every kind of broken image."""
+    """Return (what, Image, words the warning must contain) for every kind of broken image."""
     def msg(**fields) -> Image:
         m = image_msg(good, 50.0)
         for k, v in fields.items():

@@ -16,11 +16,10 @@
 import doctest
 import math
 
-import pytest
-
 from mlofc_ros import params
 from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import METHODS
+import pytest
 
 REQUIRED = {'num_bodies': (int, 2), 'window': (int, 5), 'method': (str, 'robust'),
             'min_segment_length': (float, 20.0), 'focal_length': (float, 0.0),

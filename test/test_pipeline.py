@@ -19,15 +19,14 @@ import itertools
 import math
 from typing import Dict, List, Sequence
 
-import numpy as np
-import pytest
-
 from mlofc_ros.bodies import assign, BodyTracker, relabel
 from mlofc_ros.pipeline import FOCAL_SAMPLES, FrameResult, Pipeline, TIMING_KEYS
-from mlofc_tools.render import render_sequence
 from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import segment_lines
 from mlofc_ros.tracks.undistort import undistort_segments
+from mlofc_tools.render import render_sequence
+import numpy as np
+import pytest
 
 #: The accuracy goal on the two-box sequence once the window is full.
 GOAL_MISCLASSIFIED = 0.03
@@ -37,7 +36,8 @@ GOAL_OMEGA_ERROR = 0.05
 
 
 def match_truth(segments: np.ndarray, truth: np.ndarray, tol_px: float = 3.0) -> np.ndarray:
-    """Index of the ground-truth segment under every detected segment, -1 when none.
+    """
+    Index of the ground-truth segment under every detected segment, -1 when none.
 
     A detected segment ``(M, 4)`` matches the truth segment ``(L, 4)`` whose mean distance from
     the detected endpoints to the truth segment is smallest, if below ``tol_px`` pixels
@@ -60,7 +60,8 @@ def match_truth(segments: np.ndarray, truth: np.ndarray, tol_px: float = 3.0) ->
 
 
 def evaluate(results: Sequence[FrameResult], seq, first_frame: int) -> Dict[str, float]:
-    """Misclassification and angular-velocity error of ``results`` against ``seq``'s truth.
+    """
+    Misclassification and angular-velocity error of ``results`` against ``seq``'s truth.
 
     Frames from ``first_frame`` on are scored. Estimated body ids are mapped to true bodies by
     the one permutation (over all scored frames) that agrees best, so id switches count as
@@ -107,7 +108,7 @@ def evaluate(results: Sequence[FrameResult], seq, first_frame: int) -> Dict[str,
 
 @functools.lru_cache(maxsize=None)
 def two_box_sequence(n_frames: int = 12):
-    """The goal sequence: two boxes rotating about the camera centre + static wall, 640x480."""
+    """Render the goal sequence: two boxes about the camera centre + static wall, 640x480."""
     return render_sequence(n_boxes=2, n_frames=n_frames, size=(640, 480),
                            motion='camera_centre', background=True, noise_sigma=2.0, fps=30.0,
                            seed=0)
@@ -115,7 +116,7 @@ def two_box_sequence(n_frames: int = 12):
 
 @functools.lru_cache(maxsize=None)
 def small_sequence(n_frames: int = 8):
-    """A cheap sequence for behaviour tests: one box + wall, 320x240."""
+    """Render a cheap sequence for behaviour tests: one box + wall, 320x240."""
     return render_sequence(n_boxes=1, n_frames=n_frames, size=(320, 240), seed=1)
 
 
@@ -242,8 +243,12 @@ def test_stamp_going_back_restarts_once_and_duplicates_are_skipped():
 
 
 def test_observe_and_solve_split_and_a_dropped_observation_keeps_its_resets(monkeypatch):
-    """The node tracks every frame (observe) and solves only the newest (solve): a reset that
-    a dropped observation carried (bag loop, tracker restart) reaches the solver anyway."""
+    """
+    Pass on the resets of an observation dropped unsolved.
+
+    The node tracks every frame (observe) and solves only the newest (solve): a reset that
+    a dropped observation carried (bag loop, tracker restart) reaches the solver anyway.
+    """
     seq = small_sequence()
     p = Pipeline(num_bodies=2, window=3)
     cam = seq.camera

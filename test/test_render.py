@@ -16,12 +16,11 @@
 import math
 
 import cv2
-import numpy as np
-import pytest
-
 from mlofc_ros.camera import CameraModel
 from mlofc_tools.render import FrameTruth, render_sequence, RenderedSequence
 from mlofc_tools.render.geometry import distort_pixels, so3_exp
+import numpy as np
+import pytest
 
 DIST = (-0.28, 0.09, 0.001, -0.0015, -0.01)
 
@@ -64,7 +63,7 @@ def _points_along(segs: np.ndarray, step: float = 1.0, margin: float = 3.0) -> n
 
 
 def _normals(seg: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Unit interpretation-plane normals m = K^-1 p1 x K^-1 p2 of segments (N, 4)."""
+    """Return unit interpretation-plane normals m = K^-1 p1 x K^-1 p2 of segments (N, 4)."""
     kinv = np.linalg.inv(K)
     a = np.c_[seg[:, :2], np.ones(len(seg))] @ kinv.T
     b = np.c_[seg[:, 2:], np.ones(len(seg))] @ kinv.T

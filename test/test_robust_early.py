@@ -12,13 +12,12 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Early accept of the robust solver's first start, and its fallback to the full search."""
-import numpy as np
-
 from mlofc_ros.solver import robust, segment_lines
 from mlofc_ros.solver.lines import line_flows
 from mlofc_ros.solver.models import fit_bodies, track_costs, track_stats
 from mlofc_tools.scoring import best_permutation
 from mlofc_tools.synthetic import make_scene
+import numpy as np
 
 
 def _scene(seed, k=5):

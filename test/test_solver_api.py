@@ -14,12 +14,11 @@
 """The public contract of ``segment_lines``: exactness, conventions and bad input."""
 import itertools
 
+from mlofc_ros.solver import assign_with_motions, get_method, METHODS, segment_lines, WarmStart
+from mlofc_ros.solver.lines import rotation_matrix
 import numpy as np
 import pytest
 from scenes import random_scene
-
-from mlofc_ros.solver import assign_with_motions, get_method, METHODS, segment_lines, WarmStart
-from mlofc_ros.solver.lines import rotation_matrix
 
 
 def misclassified(labels, truth, n):

@@ -12,8 +12,6 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """The cheaper forms of the cold robust solve agree with the direct ones they replace."""
-import numpy as np
-
 from mlofc_ros.solver import robust
 from mlofc_ros.solver.gpca import algebraic_normals, gram_null_vector, multibody_vector
 from mlofc_ros.solver.ksubspaces import trim_bound
@@ -21,6 +19,7 @@ from mlofc_ros.solver.lines import line_flows, rotvec_to_cayley
 from mlofc_ros.solver.models import chi2_quantile, solve_normal_equations, track_stats
 from mlofc_ros.solver.veronese import embed
 from mlofc_tools.synthetic import make_scene
+import numpy as np
 
 
 def _flows(noise_px, seed=3, k=5):

@@ -12,10 +12,6 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """The general (rotation + translation) line model of ``method='general'``."""
-import numpy as np
-import pytest
-from scenes import random_scene
-
 from mlofc_ros.solver import segment_lines
 from mlofc_ros.solver.general import (body_covariance, fit_body, fit_body_multistart,
                                       general_warm, line_residuals, LineObservations,
@@ -26,6 +22,9 @@ from mlofc_ros.solver.general.eigen import smallest_eigenpair
 from mlofc_ros.solver.general.fit import _lm_runs
 from mlofc_ros.solver.general.model import _design, _direction_columns
 from mlofc_ros.solver.lines import rotation_matrix
+import numpy as np
+import pytest
+from scenes import random_scene
 
 
 F, C = 1000.0, 500.0

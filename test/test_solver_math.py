@@ -14,15 +14,14 @@
 """The equations of the line-flow model, checked numerically against finite rotations."""
 from math import comb
 
-import numpy as np
-import pytest
-from scenes import random_scene
-
 from mlofc_ros.solver.focal import relation_space, unknown_f_rows_from_normals
 from mlofc_ros.solver.gpca import algebraic_normals
 from mlofc_ros.solver.lines import (cayley_to_rotvec, line_flows, orthonormal_pair,
                                     rotation_matrix, rotvec_to_cayley, skew)
 from mlofc_ros.solver.veronese import embed, exponents, gradient, structural_zeros
+import numpy as np
+import pytest
+from scenes import random_scene
 
 
 RNG = np.random.default_rng(7)
@@ -147,7 +146,8 @@ def test_gpca_recovers_exact_hyperplanes(n_vars, n):
 
 @pytest.mark.parametrize('n', [2, 3, 4])
 def test_structural_zeros_of_the_paper_rows(n):
-    """Z_n: monomials with y3 and (y4 or y5) vanish on every row of the paper's form.
+    """
+    Z_n: monomials with y3 and (y4 or y5) vanish on every row of the paper's form.
 
     The count is C(n+4, 5) - C(n+2, 3) (monomials containing y3 minus those containing y3 but
     neither y4 nor y5): 2, 11, 36. The paper's closed form gives 2 for n = 2 but 17 for n = 3

@@ -12,10 +12,9 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Sequential MSAC, the robust solver's sampled start: its scoring quantile."""
+from mlofc_ros.solver.robust import column_quantile
 import numpy as np
 import pytest
-
-from mlofc_ros.solver.robust import column_quantile
 
 
 @pytest.mark.parametrize('rows', [1, 2, 7, 200])

@@ -12,9 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Spatial coherence prior (``mlofc_ros.solver.spatial``)."""
-import numpy as np
-
 from mlofc_ros.solver.spatial import label_coherence, smooth_labels, spatial_neighbours
+import numpy as np
 
 
 def _exact_knn(points, k):

@@ -12,12 +12,11 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Warm-started robust solves (``init_labels``: the previous window's labels, as the pipeline)."""
-import numpy as np
-import pytest
-
 from mlofc_ros.solver import segment_lines
 from mlofc_tools.scoring import best_permutation, motion_errors
 from mlofc_tools.synthetic import make_scene
+import numpy as np
+import pytest
 
 
 def _wrong(labels, truth, n):

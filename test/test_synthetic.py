@@ -12,11 +12,10 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """The synthetic scene generator (paper section 4.1), its outliers and the scoring helpers."""
-import numpy as np
-import pytest
-
 from mlofc_tools.scoring import best_permutation, misclassification, motion_errors
 from mlofc_tools.synthetic import add_outliers, make_scene, MIXES, rotation_matrices
+import numpy as np
+import pytest
 
 
 def _normals(tracks: np.ndarray, intrinsics) -> np.ndarray:

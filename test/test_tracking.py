@@ -12,9 +12,6 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """LineTracker on a rendered sequence: persistent ids, no id jumps, reset, contract."""
-import numpy as np
-import pytest
-
 from mlofc_ros import params
 from mlofc_ros.segments.detect import LineDetector
 from mlofc_ros.tracks.carry import remap_velocity
@@ -22,6 +19,8 @@ from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.edges import refine_lines
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_tools.scoring import score_tracks, unresolvable_edges
+import numpy as np
+import pytest
 
 
 @pytest.fixture(scope='module')

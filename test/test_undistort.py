@@ -13,11 +13,10 @@
 # limitations under the License.
 """undistort_points / undistort_segments against OpenCV for every distortion model."""
 import cv2
-import numpy as np
-import pytest
-
 from mlofc_ros.camera import CameraModel
 from mlofc_ros.tracks.undistort import undistort_points, undistort_segments
+import numpy as np
+import pytest
 
 CAMERAS = [
     CameraModel(520.0, 515.0, 322.0, 241.0, (-0.28, 0.09, 0.001, -0.0005, -0.01), 'plumb_bob'),

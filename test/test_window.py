@@ -12,10 +12,9 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """TrackWindow: layout, NaN gaps, id ordering, ring wraparound, growth."""
+from mlofc_ros.tracks.window import TrackWindow
 import numpy as np
 import pytest
-
-from mlofc_ros.tracks.window import TrackWindow
 
 
 def _seg(k):

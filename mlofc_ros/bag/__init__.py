@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Bag tools: rosbag2 files (``bagfile``), offline runs (``offline``), playback (``player``).
+"""
+Bag tools: rosbag2 files (``bagfile``), offline runs (``offline``), playback (``player``).
 
 ``bagfile`` needs only ``rosbags`` (plus rclpy message packages for :func:`.bagfile.deserialize`);
 ``offline`` and ``player`` need rclpy. (``bagfile``, not ``io``: a module named like the standard

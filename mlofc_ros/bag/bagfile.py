@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Read and write rosbag2 bags (mcap and sqlite3) with ``rosbags``, without a ROS install.
+"""
+Read and write rosbag2 bags (mcap and sqlite3) with ``rosbags``, without a ROS install.
 
 Messages stay CDR bytes end to end: the bytes in a bag are exactly what DDS carries, so
 ``rclpy.serialization.deserialize_message(raw, cls)`` turns them into rclpy messages and
@@ -36,15 +37,14 @@ from types import TracebackType
 from typing import (Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Sequence, Type,
                     Union)
 
+from mlofc_ros.bag.recovery import layout, RecoveredBag, RecoveryError
+from mlofc_ros.camera import CameraModel
 import numpy as np
 from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
                                 QosTime)
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 from rosbags.typesys.store import Typestore
-
-from mlofc_ros.bag.recovery import layout, RecoveredBag, RecoveryError
-from mlofc_ros.camera import CameraModel
 
 #: Storage plugins this module writes; both are read back (``Reader`` detects the format).
 STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
@@ -91,7 +91,8 @@ def typestore() -> Typestore:
 
 
 def message_class(msgtype: str) -> Type[Any]:
-    """Import the rclpy message class of ``msgtype`` (``'sensor_msgs/msg/Image'``).
+    """
+    Import the rclpy message class of ``msgtype`` (``'sensor_msgs/msg/Image'``).
 
     Raises ``BagError`` when the interface package is not installed.
     """
@@ -387,7 +388,8 @@ class BagWriter:
             self.abort()
 
     def add_topic(self, topic: str, msgtype: str, qos: Union[str, Qos] = 'reliable') -> None:
-        """Register ``topic`` of ``msgtype`` with an offered QoS (name in :data:`QOS_PROFILES`).
+        """
+        Register ``topic`` of ``msgtype`` with an offered QoS (name in :data:`QOS_PROFILES`).
 
         Adding a topic again with the same type is a no-op; another type raises ``BagError``.
         """
@@ -409,7 +411,8 @@ class BagWriter:
         self.counts[topic] = 0
 
     def write(self, topic: str, timestamp_ns: int, msg: Any) -> None:
-        """Append ``msg`` (CDR bytes, rclpy or rosbags message) to ``topic`` at ``timestamp_ns``.
+        """
+        Append ``msg`` (CDR bytes, rclpy or rosbags message) to ``topic`` at ``timestamp_ns``.
 
         ``timestamp_ns`` is the record (log) time in nanoseconds.
         """
@@ -441,7 +444,8 @@ def _header(stamp: int, frame_id: str) -> Any:
 
 
 def image_cdr(frame: np.ndarray, stamp: int, frame_id: str = 'camera') -> bytes:
-    """CDR bytes of a ``sensor_msgs/Image`` holding ``frame`` (H, W) uint8 as ``mono8``.
+    """
+    CDR bytes of a ``sensor_msgs/Image`` holding ``frame`` (H, W) uint8 as ``mono8``.
 
     ``stamp`` is the header stamp in nanoseconds.
     """
@@ -477,7 +481,8 @@ def write_image_bag(path: PathLike, frames: Sequence[np.ndarray], stamps: Sequen
                     image_topic: str = '/camera/image_raw',
                     info_topic: str = '/camera/camera_info', storage: str = DEFAULT_STORAGE,
                     overwrite: bool = False) -> Path:
-    """Write ``frames`` ((H, W) uint8) as mono8 images, each preceded by its CameraInfo.
+    """
+    Write ``frames`` ((H, W) uint8) as mono8 images, each preceded by its CameraInfo.
 
     ``stamps`` are seconds (header stamp and record time; must be >= 0). With ``camera`` None
     no CameraInfo topic is written. Returns the bag path.

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""``mlofc_bag INPUT OUTPUT``: run the pipeline over a bag as fast as it goes, no ROS graph.
+"""
+``mlofc_bag INPUT OUTPUT``: run the pipeline over a bag as fast as it goes, no ROS graph.
 
 Reads the images (and CameraInfo) of INPUT, runs :class:`mlofc_ros.pipeline.Pipeline` on every
 image paired with the latest CameraInfo, and writes OUTPUT with the node's topics
@@ -154,7 +155,8 @@ class StopOnSigint:
 
 def choose_topics(topics: Dict[str, str], image_topic: Optional[str],
                   info_topic: Optional[str], path: str) -> Tuple[str, Optional[str]]:
-    """Pick the image topic (given, or the only Image topic) and its CameraInfo topic.
+    """
+    Pick the image topic (given, or the only Image topic) and its CameraInfo topic.
 
     The CameraInfo topic is the given one, the only CameraInfo topic, or the one next to the
     image topic (``<ns>/camera_info``); None when there is none. Raises ``BagError``.
@@ -189,7 +191,8 @@ def choose_topics(topics: Dict[str, str], image_topic: Optional[str],
 
 
 class CameraInfoPairing:
-    """Pairs each image with the latest CameraInfo (the first one for images before it).
+    """
+    Pairs each image with the latest CameraInfo (the first one for images before it).
 
     As the node does, a CameraInfo whose image size differs from the image's is not used.
     """
@@ -210,7 +213,8 @@ class CameraInfoPairing:
             self.problem = f'invalid CameraInfo: {exc}'
 
     def camera(self, size: Tuple[int, int]) -> Tuple[Optional[CameraModel], Optional[str]]:
-        """Camera for an image of ``size`` ``(width, height)`` and a problem (or None).
+        """
+        Camera for an image of ``size`` ``(width, height)`` and a problem (or None).
 
         The camera is None when unknown (the focal length is then estimated).
         """

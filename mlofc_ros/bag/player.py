@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""``mlofc_play``: a small ``ros2 bag play`` stand-in for machines without rosbag2.
+"""
+``mlofc_play``: a small ``ros2 bag play`` stand-in for machines without rosbag2.
 
 Publishes the recorded CDR bytes unchanged (``Publisher.publish`` takes serialised bytes) at the
 recorded pace times ``rate`` (0 = as fast as possible). Image topics get sensor-data QoS (best
@@ -28,6 +29,7 @@ import time
 from types import FrameType
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
+from mlofc_ros.bag.bagfile import BagError, BagMessage, BagReader, IMAGE_TYPE, message_class
 import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import Executor
@@ -35,8 +37,6 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import (HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy)
 from rclpy.signals import SignalHandlerOptions
-
-from mlofc_ros.bag.bagfile import BagError, BagMessage, BagReader, IMAGE_TYPE, message_class
 
 #: Message types published with sensor-data QoS (best effort).
 SENSOR_TYPES = frozenset({IMAGE_TYPE, 'sensor_msgs/msg/CompressedImage'})
@@ -75,7 +75,8 @@ def parse_remaps(remaps: Sequence[str]) -> Dict[str, str]:
 
 
 class Player:
-    """Publish the messages of a bag from ``node``; one publisher per played topic.
+    """
+    Publish the messages of a bag from ``node``; one publisher per played topic.
 
     ``topics`` selects topics (all when None); ``remap`` renames them on output. Topics whose
     message type is not installed are skipped (listed in ``skipped_topics``).
@@ -131,7 +132,8 @@ class Player:
              after_publish: Optional[Callable[[BagMessage], None]] = None,
              sleep: Callable[[float], None] = time.sleep,
              should_stop: Callable[[], bool] = lambda: False) -> PlayStats:
-        """Publish the bag once (or forever with ``loop``) at ``rate`` x the recorded pace.
+        """
+        Publish the bag once (or forever with ``loop``) at ``rate`` x the recorded pace.
 
         ``after_publish(msg)`` is called after each message (e.g. to wait for a consumer);
         ``sleep(seconds)`` waits between messages (pass one that spins an executor to keep
@@ -165,7 +167,8 @@ class Player:
         return stats
 
     def flush(self, timeout: float = 0.5) -> None:
-        """Wait up to ``timeout`` s in all until reliable samples are acknowledged.
+        """
+        Wait up to ``timeout`` s in all until reliable samples are acknowledged.
 
         Fast DDS acknowledges on its heartbeat (seconds), so this is a bounded courtesy wait,
         not a delivery guarantee.

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Decode ``sensor_msgs/Image`` payloads to 8-bit grayscale, without ROS (numpy + OpenCV).
+"""
+Decode ``sensor_msgs/Image`` payloads to 8-bit grayscale, without ROS (numpy + OpenCV).
 
 The one table :data:`SUPPORTED_ENCODINGS` describes every encoding understood here; decoding
 (:func:`image_to_gray`) and encoding (:func:`gray_to_image_fields`) both read it.
@@ -40,7 +41,8 @@ KIND_YUV422 = 'yuv422'    # two bytes per pixel, cv2.cvtColor(YUV2GRAY code)
 
 @dataclass(frozen=True)
 class EncodingInfo:
-    """Memory layout of one ``sensor_msgs/Image`` encoding and how it becomes gray.
+    """
+    Memory layout of one ``sensor_msgs/Image`` encoding and how it becomes gray.
 
     Attributes
     ----------
@@ -56,6 +58,7 @@ class EncodingInfo:
         One of ``KIND_MONO``, ``KIND_FLOAT``, ``KIND_COLOR``, ``KIND_BAYER``, ``KIND_YUV422``.
     cv2_code : int or None
         ``cv2.COLOR_*`` code converting the native-order array to gray, ``None`` if not needed.
+
     """
 
     name: str
@@ -133,7 +136,8 @@ def _as_int(value: Any, what: str) -> int:
 
 
 def byte_length(data: Any) -> int:
-    """Return the number of bytes in a message ``data`` field without copying it.
+    """
+    Return the number of bytes in a message ``data`` field without copying it.
 
     ``data`` may be ``bytes``, ``bytearray``, ``memoryview``, ``array.array`` (any item size
     counts its bytes), a ``uint8`` numpy array or a list/tuple of byte values (one per element).
@@ -154,7 +158,8 @@ def byte_length(data: Any) -> int:
 
 
 def as_byte_array(data: Any) -> np.ndarray:
-    """View (or, for lists, convert) a message ``data`` field as a flat ``(N,)`` uint8 array.
+    """
+    View (or, for lists, convert) a message ``data`` field as a flat ``(N,)`` uint8 array.
 
     Bytes-like objects and uint8 arrays are viewed without copying (the result may be
     read-only); list values must be integers in 0..255. Raises ``ValueError`` otherwise.
@@ -219,7 +224,8 @@ def _stretch_float(plane: np.ndarray) -> np.ndarray:
 
 def image_to_gray(height: Any, width: Any, encoding: Any, step: Any, is_bigendian: Any,
                   data: Any, max_pixels: Optional[int] = None) -> np.ndarray:
-    """Decode a ``sensor_msgs/Image`` payload to an 8-bit grayscale image.
+    """
+    Decode a ``sensor_msgs/Image`` payload to an 8-bit grayscale image.
 
     Parameters
     ----------
@@ -249,6 +255,7 @@ def image_to_gray(height: Any, width: Any, encoding: Any, step: Any, is_bigendia
         Unsupported encoding, non-positive or non-integer sizes, ``step`` too short, ``data``
         of the wrong length or type, more than ``max_pixels`` pixels, a ``32FC1`` image with no
         finite pixel.
+
     """
     info = encoding_info(encoding)
     height = _as_int(height, 'height')
@@ -281,7 +288,8 @@ def image_to_gray(height: Any, width: Any, encoding: Any, step: Any, is_bigendia
 
 
 def image_msg_to_gray(msg: Any, max_pixels: Optional[int] = None) -> np.ndarray:
-    """Decode a ``sensor_msgs/Image`` (or any object with its fields) with :func:`image_to_gray`.
+    """
+    Decode a ``sensor_msgs/Image`` (or any object with its fields) with :func:`image_to_gray`.
 
     Returns ``(H, W)`` uint8; raises ``ValueError`` for malformed messages, including ones
     missing a field.
@@ -295,7 +303,8 @@ def image_msg_to_gray(msg: Any, max_pixels: Optional[int] = None) -> np.ndarray:
 
 def gray_to_image_fields(gray_or_bgr: np.ndarray, encoding: str = 'mono8', *,
                          is_bigendian: bool = False, row_padding: int = 0) -> Dict[str, Any]:
-    """Build the fields of a ``sensor_msgs/Image`` holding ``gray_or_bgr`` (inverse of decode).
+    """
+    Build the fields of a ``sensor_msgs/Image`` holding ``gray_or_bgr`` (inverse of decode).
 
     Parameters
     ----------
@@ -317,6 +326,7 @@ def gray_to_image_fields(gray_or_bgr: np.ndarray, encoding: str = 'mono8', *,
     -------
     dict
         ``height, width, encoding, step, is_bigendian`` (0/1) and ``data`` (bytes).
+
     """
     info = encoding_info(encoding)
     if info.kind not in (KIND_MONO, KIND_FLOAT, KIND_COLOR):

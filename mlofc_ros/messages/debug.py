@@ -59,7 +59,8 @@ def _column(values: Any, m: int, name: str) -> np.ndarray:
 
 def draw_debug(gray: np.ndarray, segments: Any, labels: Any, track_ids: Any,
                angular_velocities_rad_s: Any, valid: Optional[Any] = None) -> np.ndarray:
-    """Draw the segmentation of one frame over its gray image.
+    """
+    Draw the segmentation of one frame over its gray image.
 
     Parameters
     ----------
@@ -81,6 +82,7 @@ def draw_debug(gray: np.ndarray, segments: Any, labels: Any, track_ids: Any,
     -------
     (H, W, 3) uint8
         BGR overlay (a new array).
+
     """
     img = np.asarray(gray)
     if img.dtype != np.uint8 or not (img.ndim == 2 or (img.ndim == 3 and img.shape[2] == 3)) \

@@ -14,13 +14,13 @@
 """``sensor_msgs/Image`` fields for images the node publishes (no ROS)."""
 from typing import Any, Dict
 
-import numpy as np
-
 from mlofc_ros.image.decode import gray_to_image_fields
+import numpy as np
 
 
 def bgr8_fields(image: np.ndarray) -> Dict[str, Any]:
-    """Return ``sensor_msgs/Image`` fields (all but ``header``) for a BGR image.
+    """
+    Return ``sensor_msgs/Image`` fields (all but ``header``) for a BGR image.
 
     Parameters
     ----------
@@ -32,6 +32,7 @@ def bgr8_fields(image: np.ndarray) -> Dict[str, Any]:
     dict
         ``height = H``, ``width = W``, ``encoding = 'bgr8'``, ``step = 3 W``,
         ``is_bigendian = 0``, ``data`` (``H * 3 W`` bytes).
+
     """
     img = np.asarray(image)
     if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3 or img.size == 0:

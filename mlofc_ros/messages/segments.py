@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Field layout and packing of the node's ``~/segments`` ``sensor_msgs/PointCloud2`` (no ROS).
+"""
+Field layout and packing of the node's ``~/segments`` ``sensor_msgs/PointCloud2`` (no ROS).
 
 One point per line segment, ``height = 1``, little-endian, ``point_step = 40``::
 
@@ -35,9 +36,8 @@ derive from it. The node copies ``SEGMENT_FIELDS`` into ``sensor_msgs/PointField
 """
 from typing import Any, Dict, Tuple
 
-import numpy as np
-
 from mlofc_ros.image.decode import as_byte_array
+import numpy as np
 
 #: ``sensor_msgs/PointField`` datatype codes.
 INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
@@ -98,7 +98,8 @@ def _integer_column(values: Any, m: int, name: str, lo: int, hi: int) -> np.ndar
 
 def pack_segments(segments: Any, track_ids: Any, labels: Any, residuals: Any,
                   rays: Any = None) -> bytes:
-    """Pack segments into ``PointCloud2.data`` bytes laid out as :data:`SEGMENT_FIELDS`.
+    """
+    Pack segments into ``PointCloud2.data`` bytes laid out as :data:`SEGMENT_FIELDS`.
 
     Parameters
     ----------
@@ -118,6 +119,7 @@ def pack_segments(segments: Any, track_ids: Any, labels: Any, residuals: Any,
     -------
     bytes
         ``M * SEGMENT_POINT_STEP`` bytes (``b''`` for ``M = 0``).
+
     """
     seg = np.asarray(segments)
     if seg.ndim != 2 or seg.shape[1] != 4:
@@ -152,7 +154,8 @@ def pack_segments(segments: Any, track_ids: Any, labels: Any, residuals: Any,
 
 
 def unpack_segments(data: Any) -> np.ndarray:
-    """Unpack ``PointCloud2.data`` (bytes-like or list of byte values) into ``(M,)`` records.
+    """
+    Unpack ``PointCloud2.data`` (bytes-like or list of byte values) into ``(M,)`` records.
 
     Returns a writable structured array of dtype :data:`SEGMENT_DTYPE` (fields ``x, y, z``
     (the ray), ``x1, y1, x2, y2`` px, ``track_id``, ``label``, ``residual``). Raises
@@ -167,7 +170,8 @@ def unpack_segments(data: Any) -> np.ndarray:
 
 def segment_cloud_fields(segments: Any, track_ids: Any, labels: Any,
                          residuals: Any, rays: Any = None) -> Dict[str, Any]:
-    """Return every ``sensor_msgs/PointCloud2`` field but ``header`` for the given segments.
+    """
+    Return every ``sensor_msgs/PointCloud2`` field but ``header`` for the given segments.
 
     ``fields`` is :data:`SEGMENT_FIELDS` (the caller turns the tuples into ``PointField``);
     ``height = 1``, ``width = M``, ``is_bigendian = False``, ``point_step = 40``,

@@ -20,9 +20,8 @@ nothing) in the pixels of the input image (pixel centres at integer coordinates)
 from typing import Callable, Optional, Union
 
 import cv2
-import numpy as np
-
 from mlofc_ros.segments.common import has_ximgproc
+import numpy as np
 
 #: Backends understood by :func:`make_backend` (``fld``/``edlines`` need opencv-contrib).
 BACKENDS = ('lsd', 'lsd_resize', 'fld', 'edlines')

@@ -26,9 +26,8 @@ from functools import lru_cache
 from typing import NamedTuple, Optional, Tuple
 
 import cv2
-import numpy as np
-
 from mlofc_ros.segments.common import square_kernel
+import numpy as np
 
 #: Hough angle bins over 180 deg (3 deg each).
 HOUGH_BINS = 60

@@ -20,12 +20,11 @@ centres at integer coordinates). Every segment returned by :class:`LineDetector`
 """
 from typing import Tuple
 
-import numpy as np
-
 from mlofc_ros.segments.backends import Backend, BACKENDS, make_backend
 from mlofc_ros.segments.bridge import bridge_crossings
 from mlofc_ros.segments.common import check_gray, has_ximgproc, segment_lengths
 from mlofc_ros.segments.merge import covers_any, merge_collinear, orient_by_polarity, rows_not_in
+import numpy as np
 
 __all__ = ['BACKENDS', 'bridge_crossings', 'check_gray', 'has_ximgproc', 'LineDetector',
            'merge_collinear', 'orient_by_polarity', 'segment_lengths']

@@ -20,9 +20,8 @@ the brighter side is on the left in the image (which, with ``v`` pointing down, 
 """
 from typing import Sequence
 
-import numpy as np
-
 from mlofc_ros.segments.common import angle_pairs, segment_lengths
+import numpy as np
 
 
 def orient_by_polarity(gray: np.ndarray, segments: np.ndarray, offset: float = 1.5,

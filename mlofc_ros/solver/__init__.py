@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""MLOFC solver: segment line tracks into rigid bodies by their rotation. Pure numpy, no ROS.
+"""
+MLOFC solver: segment line tracks into rigid bodies by their rotation. Pure numpy, no ROS.
 
 >>> from mlofc_ros.solver import segment_lines
 >>> res = segment_lines(tracks, 2, intrinsics=(fx, fy, cx, cy))   # doctest: +SKIP

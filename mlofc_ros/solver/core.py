@@ -77,7 +77,8 @@ def _check_size(image_size) -> Tuple[float, float]:
 
 
 def min_tracks_needed(n_bodies: int, n_frames: int, method: str, focal_known: bool) -> int:
-    """Fewest usable tracks (present in two consecutive frames) ``method`` can solve from.
+    """
+    Fewest usable tracks (present in two consecutive frames) ``method`` can solve from.
 
     See :meth:`.Method.min_tracks`.
     """
@@ -91,7 +92,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
                   rescan: Optional[Sequence[int]] = None,
                   warm_inliers: Optional[float] = None,
                   warm_competes: Optional[bool] = None) -> SegmentationResult:
-    """Segment line tracks into rigid bodies by their rotation (multibody line optical flow).
+    """
+    Segment line tracks into rigid bodies by their rotation (multibody line optical flow).
 
     Parameters
     ----------
@@ -166,6 +168,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         keyword the method does not accept, ``init_labels`` of another length than the tracks,
         ``warm_inliers`` outside [0, 1], malformed ``init_motions`` or ``rescan``, or fewer
         usable tracks than the model needs.
+
     """
     spec = get_method(method)
     n = _check_n_bodies(n_bodies)
@@ -203,7 +206,8 @@ def _check_enough_tracks(arr: np.ndarray, n: int, spec: Method, focal_known: boo
 
 def _check_keywords(spec: Method, n: int, n_tracks: int, given: Dict[str, Any]
                     ) -> Dict[str, Any]:
-    """Check the warm-start keywords ``given`` (not None) for ``spec``; their solver form.
+    """
+    Check the warm-start keywords ``given`` (not None) for ``spec``; their solver form.
 
     ``init_labels`` as int64 with unknown ids -1; ``init_motions`` as two float arrays;
     ``rescan`` as an ``(n,)`` bool mask.
@@ -268,7 +272,8 @@ def _check_rescan(rescan, n: int) -> np.ndarray:
 
 def assign_with_motions(tracks, angular_velocities, intrinsics: Sequence[float], *,
                         weighted: bool = False) -> SegmentationResult:
-    """Assign every track with GIVEN (true) motions, no estimation: the floor.
+    """
+    Assign every track with GIVEN (true) motions, no estimation: the floor.
 
     ``angular_velocities (n, 3)`` are rotation vectors in rad per frame interval (camera optical
     frame). ``weighted=False`` uses the paper's algebraic residual, ``True`` the Mahalanobis

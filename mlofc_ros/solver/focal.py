@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Unknown focal length: the paper's section 3.3 without the slope singularity, then a refinement.
+"""
+Unknown focal length: the paper's section 3.3 without the slope singularity, then a refinement.
 
 With the principal point known (image centre) and pixels centred and divided by a fixed scale
 ``s`` (~ image width, so the columns are comparable), a pixel line ``m_p = (a, b, c)`` is
@@ -37,7 +38,8 @@ from .veronese import embed, exponents, monomial_index
 
 
 def unknown_f_rows_from_normals(m: np.ndarray, e: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """Build the f-unknown rows ``(..., 6)`` (see the module docstring).
+    """
+    Build the f-unknown rows ``(..., 6)`` (see the module docstring).
 
     From pixel-line normals ``m``, directions ``e`` (orthogonal to ``m``) and flows ``g``.
     """
@@ -49,7 +51,8 @@ def unknown_f_rows_from_normals(m: np.ndarray, e: np.ndarray, g: np.ndarray) -> 
 
 @lru_cache(maxsize=None)
 def relation_space(degree: int) -> np.ndarray:
-    """Orthonormal basis ``(M, q)`` of degree-n polynomials vanishing on every f-unknown row.
+    """
+    Orthonormal basis ``(M, q)`` of degree-n polynomials vanishing on every f-unknown row.
 
     The first five coordinates of the f-unknown row (:func:`unknown_f_rows_from_normals`)
     depend on three parameters up to scale, so they lie on a hypersurface: for n >= 4 a
@@ -106,7 +109,8 @@ def first_order_focal(tracks: np.ndarray, n: int, image_size: Tuple[float, float
 
 def profile_cost(tracks: np.ndarray, labels: np.ndarray, n: int, centre: Tuple[float, float]
                  ) -> Callable[[float], float]:
-    """``cost(f)``: total Mahalanobis cost of the exact model at focal length ``f``, bodies refit.
+    """
+    ``cost(f)``: total Mahalanobis cost of the exact model at focal length ``f``, bodies refit.
 
     Tracks labelled ``-1`` do not count.
     """

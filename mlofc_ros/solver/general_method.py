@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Method ``'general'``: a rotation AND a translation per body (the model of :mod:`.general`).
+"""
+Method ``'general'``: a rotation AND a translation per body (the model of :mod:`.general`).
 
 The rotation-only step (:func:`.solve_robust`, as :data:`ROTATION_STEP`) supplies the focal
 length when it is unknown and a start; the bodies are then either tracked from the previous
@@ -101,7 +102,8 @@ class _Tracked(NamedTuple):
 def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
                   init_motions: Optional[Tuple[np.ndarray, np.ndarray]] = None,
                   rescan: Optional[np.ndarray] = None) -> SegmentationResult:
-    """Solve ``problem`` with a rotation and a translation per body.
+    """
+    Solve ``problem`` with a rotation and a translation per body.
 
     ``init_labels (N,)``: the previous window's labels (``-1`` unknown, ids below n);
     ``init_motions``: its motions ``(W (n, 3), T (n, 3))``, NaN rows unknown; ``rescan (n,)``
@@ -137,7 +139,8 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
 def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarray,
            init_motions: Tuple[np.ndarray, np.ndarray], neighbours: np.ndarray
            ) -> Optional[_Tracked]:
-    """Track the previous window's bodies; None when they no longer explain the window.
+    """
+    Track the previous window's bodies; None when they no longer explain the window.
 
     The lines are assigned at the previous motions as they are (a few LM steps on the flat
     fitted-direction model moved a body with few lines into another basin: own2+bg s2, frame
@@ -178,7 +181,8 @@ def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarr
 
 def _search(obs: LineObservations, rot: SegmentationResult, init_labels: Optional[np.ndarray],
             neighbours: np.ndarray, rng: np.random.Generator) -> dict:
-    """Find the bodies by the multi-start search.
+    """
+    Find the bodies by the multi-start search.
 
     Starts: the previous labels (when given), the rotation-only labels, a spatial clustering.
     """
@@ -191,7 +195,8 @@ def _search(obs: LineObservations, rot: SegmentationResult, init_labels: Optiona
 
 
 def _refit_bodies(obs: LineObservations, sol: dict, sigma2: float, rescan: np.ndarray) -> None:
-    """Refit every body of ``sol`` in place at the measured noise ``sigma2`` (robust cost).
+    """
+    Refit every body of ``sol`` in place at the measured noise ``sigma2`` (robust cost).
 
     A body marked in ``rescan`` (tracked: it took only a few LM steps from the previous
     window's motion, so a wrong basin -- a pivot, the depth reversal -- would stay window after
@@ -235,7 +240,8 @@ def _result(obs: LineObservations, rot: SegmentationResult, sol: dict, sigma2: f
 
 def _published(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
                sigma2: float) -> Tuple[np.ndarray, np.ndarray]:
-    """Return the published rotation vectors ``(n, 3)`` and their covariances ``(n, 3, 3)``.
+    """
+    Return the published rotation vectors ``(n, 3)`` and their covariances ``(n, 3, 3)``.
 
     Each body's refit (:func:`published_motions`); a body whose refit has no finite covariance
     publishes the segmentation's motion ``W`` (nor would it decide, through the pipeline's
@@ -254,7 +260,8 @@ def _published(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.n
 
 def published_motions(obs: LineObservations, labels: np.ndarray, W: np.ndarray,
                       T: np.ndarray, sigma2: float) -> Tuple[np.ndarray, np.ndarray]:
-    """Return the motions ``(W (n, 3), T (n, 3))`` that the method publishes.
+    """
+    Return the motions ``(W (n, 3), T (n, 3))`` that the method publishes.
 
     Each body's refit from ``W, T`` (the segmentation's, at noise ``sigma2`` px^2) on its
     ``labels`` at :data:`PUBLISH_NOISE_SCALE` of that noise; bodies with fewer than 3 lines

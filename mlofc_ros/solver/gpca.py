@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Algebraic multibody fit (GPCA): the paper's Algorithm 1 on rows of any dimension.
+"""
+Algebraic multibody fit (GPCA): the paper's Algorithm 1 on rows of any dimension.
 
 Every row ``y`` of a body lies on that body's hyperplane ``y . u_i = 0`` (``u_i`` has last
 entry 1), so every row satisfies ``p(y) = prod_i (y . u_i) = nu_n(y) . U = 0``. ``U`` is the
@@ -25,7 +26,8 @@ from .veronese import embed, gradient
 
 
 def balance_scale(rows: np.ndarray) -> float:
-    """Scale for the last coordinate so it is as large as the others on average.
+    """
+    Scale for the last coordinate so it is as large as the others on average.
 
     The last entry of a row is a flow (radians per frame, small) while the others are O(1):
     without balancing the high powers of the last coordinate drown in rounding.
@@ -38,7 +40,8 @@ def balance_scale(rows: np.ndarray) -> float:
 def multibody_vector(rows: np.ndarray, degree: int,
                      relations: Optional[np.ndarray] = None,
                      embedded: Optional[np.ndarray] = None) -> np.ndarray:
-    """Null vector ``U (M,)`` of the Veronese-embedded rows ``(R, D)``.
+    """
+    Null vector ``U (M,)`` of the Veronese-embedded rows ``(R, D)``.
 
     ``relations (M, q)``: polynomials known to vanish on every possible row (structural zeros
     or the hypersurface of the f-unknown rows); ``U`` is sought orthogonal to them so that the
@@ -60,7 +63,8 @@ def multibody_vector(rows: np.ndarray, degree: int,
 def recover_normals(rows: np.ndarray, coeffs: np.ndarray, degree: int, n: int,
                     delta: float = 1e-10, embedded: Optional[np.ndarray] = None,
                     lower: Optional[np.ndarray] = None) -> np.ndarray:
-    """Recover the hyperplane normals ``(n, D)`` (last entry 1): the paper's Algorithm 1, step 5.
+    """
+    Recover the hyperplane normals ``(n, D)`` (last entry 1): the paper's Algorithm 1, step 5.
 
     For ``i = n .. 1`` pick the row minimising
     ``(|p(z)| / |Pi grad p(z)| + delta) / (prod_{l>i} |z . u_l| / |Pi u_l| + delta)``
@@ -93,7 +97,8 @@ def recover_normals(rows: np.ndarray, coeffs: np.ndarray, degree: int, n: int,
 
 def algebraic_normals(rows: np.ndarray, n: int,
                       relations: Optional[np.ndarray] = None, gram: bool = False) -> np.ndarray:
-    """GPCA: hyperplane normals ``(n, D)`` with last entry 1, from rows ``(R, D)``.
+    """
+    GPCA: hyperplane normals ``(n, D)`` with last entry 1, from rows ``(R, D)``.
 
     The rows are used as they are: rescaling the small last coordinate (the flow) to the size
     of the others amplifies its noise in the least-squares fit of ``U`` (measured: 7% -> 17%
@@ -112,7 +117,8 @@ def algebraic_normals(rows: np.ndarray, n: int,
 
 
 def gram_null_vector(embedded: np.ndarray) -> np.ndarray:
-    """Return the unit eigenvector ``(M,)`` of the smallest eigenvalue of ``embedded^T embedded``.
+    """
+    Return the unit eigenvector ``(M,)`` of the smallest eigenvalue of ``embedded^T embedded``.
 
     The least-squares null vector like :func:`multibody_vector`, from one ``(M, M)`` product
     instead of a QR of the tall ``(R, M)`` matrix (2-4x cheaper at R = 1600, where the QR's

@@ -20,7 +20,8 @@ from .models import chi2_quantile, fit_stats, median, quad_costs, row_min, Track
 
 
 def assign(costs: np.ndarray, threshold: Optional[np.ndarray] = None) -> np.ndarray:
-    """Label ``(N,)`` every track with the argmin of ``costs (N, n)``.
+    """
+    Label ``(N,)`` every track with the argmin of ``costs (N, n)``.
 
     ``-1`` for unusable tracks (nan) and above ``threshold (N,)`` when given (outliers).
     """
@@ -55,7 +56,8 @@ def ksubspaces(stats: TrackStats, n: int, labels: np.ndarray, max_iter: int = 10
                threshold: Optional[np.ndarray] = None, min_tracks: int = 2,
                trim_dof: Optional[np.ndarray] = None, trim_p: float = 0.9999
                ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Refine a labelling until it stops changing.
+    """
+    Refine a labelling until it stops changing.
 
     Parameters
     ----------
@@ -65,17 +67,25 @@ def ksubspaces(stats: TrackStats, n: int, labels: np.ndarray, max_iter: int = 10
         Number of bodies.
     labels : (N,) int
         Initial labels (``-1`` = unused).
+    max_iter : int
+        Most refinement rounds (a labelling that cycles is stopped earlier).
     threshold : (N,), optional
         Per-track outlier threshold on the cost: tracks above it get ``-1`` and do not move
         any body.
+    min_tracks : int
+        Fewest tracks a body keeps: an emptier body is reseeded with the worst-explained
+        tracks, so no body dies out.
     trim_dof : (N,), optional
         Degrees of freedom of every track's cost: when given (and no ``threshold``), every
         iteration re-estimates the noise from the median cost and excludes the tracks above the
         ``trim_p`` chi-square bound from the next fit, so gross outliers never pull a body.
+    trim_p : float
+        Chi-square probability of the trimming bound.
 
     Returns
     -------
     labels : (N,), c : (n, 3) Cayley vectors, costs : (N, n).
+
     """
     labels = np.asarray(labels, dtype=np.int64).copy()
     # the chi-square quantiles of the trimming depend on the dof only: computed once
@@ -116,7 +126,8 @@ def ksubspaces(stats: TrackStats, n: int, labels: np.ndarray, max_iter: int = 10
 def trim_bound(costs: np.ndarray, dof: np.ndarray, p: float = 0.9999,
                floor: float = 1e-8, quantiles: Optional[Tuple[np.ndarray, np.ndarray]] = None
                ) -> np.ndarray:
-    """Per-track chi-square bound ``(N,)`` at the noise estimated from the median best cost.
+    """
+    Per-track chi-square bound ``(N,)`` at the noise estimated from the median best cost.
 
     ``quantiles``: ``(chi2_quantile(0.5, dof), chi2_quantile(p, dof))`` when already computed.
     """

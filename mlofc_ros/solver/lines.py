@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Interpretation-plane normals of line tracks, their noise, and the exact Cayley line flow.
+"""
+Interpretation-plane normals of line tracks, their noise, and the exact Cayley line flow.
 
 A segment with normalised endpoints ``x_a, x_b`` (``x = K^-1 [u, v, 1]``) spans the plane through
 the camera centre with unit normal ``m = x_a x x_b / |x_a x x_b|``. A rotation ``R`` of the body
@@ -91,7 +92,8 @@ def normalise_points(uv: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
 
 def interpretation_normals(tracks: np.ndarray, intrinsics: Intrinsics,
                            endpoint_sigma: float = 1.0) -> Tuple[np.ndarray, np.ndarray]:
-    """Compute the unit normals ``m`` and their covariance for every track and frame.
+    """
+    Compute the unit normals ``m`` and their covariance for every track and frame.
 
     Parameters
     ----------
@@ -110,6 +112,7 @@ def interpretation_normals(tracks: np.ndarray, intrinsics: Intrinsics,
     cov : (N, K, 3, 3) float64
         Covariance of ``m`` from isotropic endpoint noise (rank 2: orthogonal to ``m``). Short
         segments and segments far from the principal point are noisier.
+
     """
     m, cov = _normals(np.asarray(tracks, dtype=float), intrinsics, endpoint_sigma)
     return _per_track(m), _per_track(cov)
@@ -136,7 +139,8 @@ def _per_track(a: np.ndarray) -> np.ndarray:
 
 def _normals(tracks: np.ndarray, intrinsics: Intrinsics, endpoint_sigma: float = 1.0
              ) -> Tuple[np.ndarray, np.ndarray]:
-    """Compute :func:`interpretation_normals` slot-major: ``m (3, K, N)``, ``cov (3, 3, K, N)``.
+    """
+    Compute :func:`interpretation_normals` slot-major: ``m (3, K, N)``, ``cov (3, 3, K, N)``.
 
     The arithmetic is the stacked form's, operation for operation: bit-identical results.
     """
@@ -200,7 +204,8 @@ def _norm(v: np.ndarray) -> np.ndarray:
 
 
 def _consistent_signs(m: np.ndarray, ok: np.ndarray) -> None:
-    """Flip normals ``m (3, K, N)`` in place so that ``m_k . m_prev > 0`` along each track.
+    """
+    Flip normals ``m (3, K, N)`` in place so that ``m_k . m_prev > 0`` along each track.
 
     ``m_prev``: the previous present frame (``ok (K, N)``), after its own flip. The sign of
     frame k is the product of the signs of the raw dot products along the track, so one
@@ -241,7 +246,8 @@ def _consistent_signs_loop(m: np.ndarray, ok: np.ndarray) -> None:
 
 
 def _cross5(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
-    """Write ``a x b`` (``(3, ...)``) given rolled vectors ``(5, ...)`` ``(v0, v1, v2, v0, v1)``.
+    """
+    Write ``a x b`` (``(3, ...)``) given rolled vectors ``(5, ...)`` ``(v0, v1, v2, v0, v1)``.
 
     The three components in three numpy calls (slices of the rolled arrays), with the products
     and differences of ``np.cross``.
@@ -251,7 +257,8 @@ def _cross5(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
 
 
 def _pair_basis(m: np.ndarray) -> np.ndarray:
-    """Compute :func:`orthonormal_pair` component-major: ``m (3, ...)`` -> ``E (5, 2, ...)``.
+    """
+    Compute :func:`orthonormal_pair` component-major: ``m (3, ...)`` -> ``E (5, 2, ...)``.
 
     ``E`` is rolled (rows 3, 4 repeat rows 0, 1) for :func:`_cross5`.
     """
@@ -272,7 +279,8 @@ def _pair_basis(m: np.ndarray) -> np.ndarray:
 
 
 def orthonormal_pair(m: np.ndarray) -> np.ndarray:
-    """Orthonormal basis ``E (..., 3, 2)`` of the plane orthogonal to each vector ``m (..., 3)``.
+    """
+    Orthonormal basis ``E (..., 3, 2)`` of the plane orthogonal to each vector ``m (..., 3)``.
 
     Built from the axis least aligned with ``m`` so it is well conditioned for every direction
     (vertical image lines included).
@@ -284,7 +292,8 @@ def orthonormal_pair(m: np.ndarray) -> np.ndarray:
 
 @dataclass
 class LineFlows:
-    """Line flows of every consecutive frame pair where a track is present in both frames.
+    """
+    Line flows of every consecutive frame pair where a track is present in both frames.
 
     ``P`` pairs; each gives two equations ``r = M c - b`` for its body's Cayley vector ``c``.
     ``cov0``/``cov1`` are the normal covariances for 1 px endpoint noise.
@@ -401,7 +410,8 @@ class LineFlows:
 
 
 def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
-    """Exact (Cayley midpoint) line flows of a window of tracks; see the module docstring.
+    """
+    Exact (Cayley midpoint) line flows of a window of tracks; see the module docstring.
 
     Parameters
     ----------
@@ -409,6 +419,7 @@ def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
         Endpoints in pixels, NaN where missing; only consecutive present frames form pairs.
     intrinsics : (fx, fy, cx, cy)
         Pixels.
+
     """
     m, cov = _normals(np.asarray(tracks, dtype=float), intrinsics)   # (3, K, N), (3, 3, K, N)
     n_slots, n_tracks = m.shape[1] - 1, m.shape[2]
@@ -441,7 +452,8 @@ def line_flows(tracks: np.ndarray, intrinsics: Intrinsics) -> LineFlows:
 
 
 def _by_pair(a: np.ndarray, flat: Optional[np.ndarray]) -> np.ndarray:
-    """Values ``(P, ...)`` of every pair from a slot-major array ``(..., S, N)``.
+    """
+    Values ``(P, ...)`` of every pair from a slot-major array ``(..., S, N)``.
 
     ``flat``: the pairs' indices ``track * S + slot``, or None for all (track, slot) in order.
     """
@@ -451,7 +463,8 @@ def _by_pair(a: np.ndarray, flat: Optional[np.ndarray]) -> np.ndarray:
 
 
 def _blocks(E: np.ndarray, cov0: np.ndarray, cov1: np.ndarray, zc: np.ndarray) -> None:
-    """Write the residual covariance blocks of every pair into ``zc[4:8] (4, 2, S, N)``.
+    """
+    Write the residual covariance blocks of every pair into ``zc[4:8] (4, 2, S, N)``.
 
     ``zc[6:8, j]``: row j of the diagonal block ``A = E^T (S_m0 + S_m1) E`` (2x2) of the pair's
     residual ``r = M c - b``; ``zc[4:6, j]``: of the block ``B = Cov(r_s, r_s+1) =
@@ -474,7 +487,8 @@ _MISSING = np.array([[0.0] * 6 + [1.0, 0.0], [0.0] * 7 + [1.0]])[:, :, None]
 
 
 def _whiten(z: np.ndarray, pair_ok: np.ndarray) -> np.ndarray:
-    """Whitened rows ``(N, 2 S, 4)`` of every track from the pair data ``z (S, 2, 8, N)``.
+    """
+    Whitened rows ``(N, 2 S, 4)`` of every track from the pair data ``z (S, 2, 8, N)``.
 
     ``z[s, j, :, i]`` is ``[M_j, -b_j, B_j0, B_j1, A_j0, A_j1]`` of track i's slot s (see
     :func:`_blocks`); ``pair_ok (S, N)`` says which slots hold a pair (the others may hold
@@ -521,7 +535,8 @@ def _whiten(z: np.ndarray, pair_ok: np.ndarray) -> np.ndarray:
 def whiten_tracks(n_tracks: int, n_slots: int, ti: np.ndarray, ki: np.ndarray, E: np.ndarray,
                   cov0: np.ndarray, cov1: np.ndarray, M: np.ndarray, b: np.ndarray
                   ) -> np.ndarray:
-    """Whiten every track's stacked residuals ``r = M c - b`` with their full covariance.
+    """
+    Whiten every track's stacked residuals ``r = M c - b`` with their full covariance.
 
     Returns the whitened rows ``[M, -b]`` of every track ``(N, 2 (K-1), 4)`` by frame-pair
     slot, zero where a pair is missing (its slot is uncorrelated with the others, so its

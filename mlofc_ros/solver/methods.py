@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The solver's methods as objects: one table of what each needs and what the callers get.
+"""
+The solver's methods as objects: one table of what each needs and what the callers get.
 
 Every method of :func:`.segment_lines` is a :class:`Method`: its solve function and what the
 layers above need to know to call it -- whether it is slow (a node solves it off its tracking
@@ -53,7 +54,8 @@ WARM_KEYWORDS = ('init_labels', 'init_motions', 'rescan', 'warm_inliers', 'warm_
 
 @dataclass(frozen=True, eq=False)
 class Method:
-    """One method of :func:`.segment_lines`.
+    """
+    One method of :func:`.segment_lines`.
 
     Attributes
     ----------
@@ -84,6 +86,7 @@ class Method:
     algebraic_fit : bool
         It needs the algebraic fit determined (enough tracks for the multibody polynomial)
         even at a known focal length; otherwise two tracks per body do.
+
     """
 
     name: str
@@ -109,7 +112,8 @@ class Method:
         return keyword in self.keywords and keyword not in self.fixed
 
     def min_tracks(self, n_bodies: int, n_frames: int, focal_known: bool) -> int:
-        """Fewest usable tracks (present in two consecutive frames) it can solve from.
+        """
+        Fewest usable tracks (present in two consecutive frames) it can solve from.
 
         Each track gives ``2 (K - 1)`` equations; the algebraic fit needs one fewer than the
         number of monomials (``C(n + 3, 3)`` with known f, ``C(n + 5, 5)`` without); every body

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Choosing the number of bodies (``n_bodies=0``): a BIC-style score on truncated costs.
+"""
+Choosing the number of bodies (``n_bodies=0``): a BIC-style score on truncated costs.
 
 For ``n = 1 .. n_max`` the method is run; every track costs its chi-square under its best body,
 capped at the outlier bound, all at ONE noise level (the one estimated with the richest model,
@@ -38,7 +39,8 @@ MIN_BODY_FRACTION = 0.04
 
 
 def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) -> float:
-    """BIC of a segmentation: ``R log(RSS / R) + 3 n log R + 2 N log n``.
+    """
+    BIC of a segmentation: ``R log(RSS / R) + 3 n log R + 2 N log n``.
 
     ``2 N log n`` is minus twice the log-likelihood of the labels under a uniform prior: with
     two frames a line has only two equations, and the freedom to pick the best of n bodies
@@ -70,7 +72,8 @@ def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) 
 def select_bodies(tracks: np.ndarray, intrinsics: Optional[Tuple[float, float, float, float]],
                   image_size: Tuple[float, float], method: Method, *, seed: int = 0,
                   max_bodies: int = MAX_BODIES) -> SegmentationResult:
-    """Run ``method`` for n = 1..max_bodies and return the result with the best score.
+    """
+    Run ``method`` for n = 1..max_bodies and return the result with the best score.
 
     ``tracks (N, K, 4)``, ``intrinsics`` and ``image_size`` as checked by
     :func:`.segment_lines`; every n is solved cold.

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Per-body rotation models: residual costs of every track and (weighted) least-squares fits.
+"""
+Per-body rotation models: residual costs of every track and (weighted) least-squares fits.
 
 Two residuals exist side by side:
 
@@ -31,7 +32,8 @@ from .lines import LineFlows
 
 @dataclass
 class TrackStats:
-    """Per-track normal equations: the cost of a track under any ``c`` is a quadratic form.
+    """
+    Per-track normal equations: the cost of a track under any ``c`` is a quadratic form.
 
     ``cost(c) = c^T A c - 2 g . c + k`` with ``A = sum M^T M``, ``g = sum M^T b``,
     ``k = sum b^T b`` over the track's frame pairs, with ``M, b`` whitened per track (weighted)
@@ -51,7 +53,8 @@ class TrackStats:
 
 
 def track_stats(flows: LineFlows, weighted: bool = True) -> TrackStats:
-    """Accumulate :class:`TrackStats` of every track (vectorised over pairs).
+    """
+    Accumulate :class:`TrackStats` of every track (vectorised over pairs).
 
     Cached on ``flows``: the robust solve, its final pass and the covariances all need them.
     """
@@ -77,7 +80,8 @@ def _track_stats(flows: LineFlows, weighted: bool) -> TrackStats:
 
 
 def quad_costs(stats: TrackStats, c: np.ndarray) -> np.ndarray:
-    """Costs ``(N, H)`` of every track under every Cayley vector ``c (H, 3)`` (nan: unusable).
+    """
+    Costs ``(N, H)`` of every track under every Cayley vector ``c (H, 3)`` (nan: unusable).
 
     Unweighted costs are divided by ``1 + |c|^2`` (distance to the hyperplane ``[c ; 1]``).
     """
@@ -137,7 +141,8 @@ def _stacked(stats: TrackStats) -> np.ndarray:
 
 
 def sum_by_track(values: np.ndarray, pair_track: np.ndarray, n_tracks: int) -> np.ndarray:
-    """Sum per-pair ``values (P, ...)`` into ``(n_tracks, ...)``; pairs are sorted by track.
+    """
+    Sum per-pair ``values (P, ...)`` into ``(n_tracks, ...)``; pairs are sorted by track.
 
     ``np.add.reduceat`` over the runs of equal track index: several times faster than
     ``np.add.at``, which matters because it runs on every cost evaluation.
@@ -151,7 +156,8 @@ def sum_by_track(values: np.ndarray, pair_track: np.ndarray, n_tracks: int) -> n
 
 
 def pair_costs(flows: LineFlows, c: np.ndarray) -> np.ndarray:
-    """Algebraic (unweighted) cost ``(P, n)`` of every frame pair under every body.
+    """
+    Algebraic (unweighted) cost ``(P, n)`` of every frame pair under every body.
 
     The distance of the pair's rows to the hyperplane ``[c ; 1]`` (the module docstring); the
     weighted costs are per track (:func:`track_costs`), since whitening couples a track's pairs.
@@ -162,7 +168,8 @@ def pair_costs(flows: LineFlows, c: np.ndarray) -> np.ndarray:
 
 
 def track_costs(flows: LineFlows, c: np.ndarray, weighted: bool = True) -> np.ndarray:
-    """Cost ``(N, n)`` of every track under every body: sum over its frame pairs.
+    """
+    Cost ``(N, n)`` of every track under every body: sum over its frame pairs.
 
     Tracks with no frame pair get ``nan``.
     """
@@ -193,7 +200,8 @@ def _empty_tracks(flows: LineFlows) -> np.ndarray:
 
 def fit_bodies(flows: LineFlows, track_labels: np.ndarray, n: int, weighted: bool = True
                ) -> Tuple[np.ndarray, np.ndarray]:
-    """Least-squares Cayley vector ``(n, 3)`` of every body from the tracks labelled with it.
+    """
+    Least-squares Cayley vector ``(n, 3)`` of every body from the tracks labelled with it.
 
     Returns the Cayley vectors (zeros for a body without data) and the information matrices
     ``(n, 3, 3)`` (``sum M^T W M``, for 1 px noise when weighted): the covariance of ``c`` is
@@ -203,7 +211,8 @@ def fit_bodies(flows: LineFlows, track_labels: np.ndarray, n: int, weighted: boo
 
 
 def solve_normal_equations(info: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve ``info c = rhs`` per body.
+    """
+    Solve ``info c = rhs`` per body.
 
     A relative ridge keeps rank-deficient (and empty) bodies finite: a single line does not see
     the rotation about its own normal.
@@ -213,7 +222,8 @@ def solve_normal_equations(info: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 
 def normal_ridge(trace: np.ndarray) -> np.ndarray:
-    """Ridge ``(...)`` added to the diagonal of 3x3 normal equations with the given traces.
+    """
+    Ridge ``(...)`` added to the diagonal of 3x3 normal equations with the given traces.
 
     1e-9 of the mean eigenvalue (positive even for an empty system): what every solve of
     :func:`solve_normal_equations` and :func:`.robust.free_residuals` adds.
@@ -222,7 +232,8 @@ def normal_ridge(trace: np.ndarray) -> np.ndarray:
 
 
 def row_min(a: np.ndarray) -> np.ndarray:
-    """Minimum ``(N,)`` of every row of a narrow ``(N, n)`` array (``n >= 1``, no nan).
+    """
+    Minimum ``(N,)`` of every row of a narrow ``(N, n)`` array (``n >= 1``, no nan).
 
     Taken column by column: the same values as ``a.min(axis=1)``, several times faster along
     the few bodies' short axis.
@@ -238,7 +249,8 @@ _EYE3.setflags(write=False)
 
 
 def median(x: np.ndarray) -> float:
-    """``np.median`` of a 1-D array without nan, from one partition (same value, less overhead).
+    """
+    ``np.median`` of a 1-D array without nan, from one partition (same value, less overhead).
 
     It runs in every K-subspaces iteration, where np.median's generic machinery cost more
     than the median itself.

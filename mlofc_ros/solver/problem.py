@@ -20,7 +20,8 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Problem:
-    """The arguments of :func:`.segment_lines` that every method uses, checked.
+    """
+    The arguments of :func:`.segment_lines` that every method uses, checked.
 
     Attributes
     ----------
@@ -34,6 +35,7 @@ class Problem:
         Pixels.
     seed : int
         Seed of the random parts.
+
     """
 
     tracks: np.ndarray

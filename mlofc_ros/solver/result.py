@@ -21,7 +21,8 @@ import numpy as np
 
 @dataclass
 class Diagnostics:
-    """How a segmentation was found: noise level, starts, scores (for benchmarks and tuning).
+    """
+    How a segmentation was found: noise level, starts, scores (for benchmarks and tuning).
 
     Fields that a method does not produce keep their defaults (``None``, ``False``, empty).
 
@@ -68,6 +69,7 @@ class Diagnostics:
         :attr:`SegmentationResult.translation_directions`).
     note : str or None
         Why a method answered in a reduced form (e.g. 'general' on two frames).
+
     """
 
     sigma_px: float = math.nan
@@ -90,7 +92,8 @@ class Diagnostics:
 
 @dataclass
 class SegmentationResult:
-    """What :func:`mlofc_ros.solver.segment_lines` returns.
+    """
+    What :func:`mlofc_ros.solver.segment_lines` returns.
 
     Attributes
     ----------
@@ -123,6 +126,7 @@ class SegmentationResult:
         without a translation); None for the rotation-only methods.
     diagnostics : Diagnostics
         How the result was found (noise level, starts, scores).
+
     """
 
     labels: np.ndarray
@@ -142,5 +146,5 @@ class SegmentationResult:
 
     @property
     def n_bodies(self) -> int:
-        """Number of bodies in the model."""
+        """Return the number of bodies in the model."""
         return int(self.angular_velocities.shape[0])

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Our robust method: several initialisations, noise-weighted K-subspaces, outlier rejection.
+"""
+Our robust method: several initialisations, noise-weighted K-subspaces, outlier rejection.
 
 Candidates (all refined by Mahalanobis-weighted K-subspaces):
 
@@ -94,7 +95,8 @@ def _sample_pairs(rng: np.random.Generator, pool: np.ndarray, mid: np.ndarray,
 
 
 def column_quantile(x: np.ndarray, q: float) -> np.ndarray:
-    """Return ``np.quantile(x, q, axis=0)`` (method 'linear') of ``x (R, H)`` without nan.
+    """
+    Return ``np.quantile(x, q, axis=0)`` (method 'linear') of ``x (R, H)`` without nan.
 
     The same order statistics and interpolation as numpy, from one partition at the lower rank
     (numpy's quantile moves axes and partitions at extra ranks: 5x slower here).
@@ -114,7 +116,8 @@ def column_quantile(x: np.ndarray, q: float) -> np.ndarray:
 def sequential_msac(stats: TrackStats, tracks: np.ndarray, n: int, dof: np.ndarray,
                     rng: np.random.Generator, n_samples: int = 200
                     ) -> Tuple[np.ndarray, float]:
-    """Labels from fitting one body at a time to the tracks not yet explained; noise (px).
+    """
+    Labels from fitting one body at a time to the tracks not yet explained; noise (px).
 
     Scale-free: a hypothesis is scored by a low quantile of its per-degree-of-freedom costs
     over the remaining tracks (least k-th order statistic, k = half the expected share of the
@@ -152,7 +155,8 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
                         init_labels: Optional[np.ndarray] = None,
                         warm_inliers: float = WARM_INLIERS,
                         warm_competes: bool = True) -> Segmentation:
-    """Best of several initialisations, weighted K-subspaces, outliers rejected.
+    """
+    Best of several initialisations, weighted K-subspaces, outliers rejected.
 
     ``init_labels`` (N,): the previous window's labels (``-1`` unknown). Their final pass is
     returned alone when it leaves at least ``warm_inliers`` of the usable tracks inliers;
@@ -244,7 +248,8 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
 
 
 def free_residuals(stats: TrackStats, dof: np.ndarray) -> np.ndarray:
-    """Least-squares cost ``(N,)`` of every track fitted ALONE (its own rotation); nan if none.
+    """
+    Least-squares cost ``(N,)`` of every track fitted ALONE (its own rotation); nan if none.
 
     Chi-square with about ``dof - FREE_DOF`` degrees of freedom (times the noise variance)
     whatever body the track belongs to: no segmentation is needed. nan where
@@ -295,7 +300,8 @@ EARLY_SEPARATED = 0.95
 
 def early_stats(stats: TrackStats, exact: np.ndarray, labels: np.ndarray, dof: np.ndarray,
                 sigma: Optional[float] = None) -> Optional[Tuple[float, float, float]]:
-    """Compute the early-accept statistics of a refined start (None: no reference noise).
+    """
+    Compute the early-accept statistics of a refined start (None: no reference noise).
 
     ``exact (N, n)``: exact costs under the start's bodies; ``labels (N,)`` its labels;
     ``sigma``: their :func:`noise_sigma` when already computed. Returns (noise ratio to the
@@ -320,7 +326,8 @@ def early_stats(stats: TrackStats, exact: np.ndarray, labels: np.ndarray, dof: n
 
 def _early_accept(flows: LineFlows, tracks: np.ndarray, stats: TrackStats, first: tuple,
                   dof: np.ndarray) -> Optional[Segmentation]:
-    """Return the final pass of the refined first start when it is clearly right, else None.
+    """
+    Return the final pass of the refined first start when it is clearly right, else None.
 
     ``first``: ``(name, labels (N,), c (n, 3), quadratic costs (N, n))`` from K-subspaces.
     """
@@ -340,7 +347,8 @@ def _early_accept(flows: LineFlows, tracks: np.ndarray, stats: TrackStats, first
 def _final_pass(flows: LineFlows, tracks: np.ndarray, lab: np.ndarray, c: np.ndarray,
                 dof: np.ndarray, sigma: Optional[float], name: str, scores: dict,
                 costs: Optional[np.ndarray] = None) -> Segmentation:
-    """Exact costs, noise, outlier rejection, spatial smoothing, refit: outliers move no body.
+    """
+    Exact costs, noise, outlier rejection, spatial smoothing, refit: outliers move no body.
 
     ``costs (N, n)``: the exact costs under ``c`` when already known.
     """

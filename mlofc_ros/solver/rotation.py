@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The rotation-only methods, at a known or an unknown focal length.
+"""
+The rotation-only methods, at a known or an unknown focal length.
 
 ``'algebraic'``, ``'kmeans'`` and ``'algebraic+kmeans'`` are the paper's (unweighted);
 ``'robust'`` is ours (:mod:`.robust`). Each is a *known-f segmentation*: line flows in, a
@@ -94,7 +95,8 @@ def kmeans(flows: LineFlows, tracks: np.ndarray, n: int,
 def robust_segmenter(init_labels: Optional[np.ndarray] = None,
                      warm_inliers: Optional[float] = None,
                      warm_competes: Optional[bool] = None) -> KnownFocal:
-    """Return our method (:func:`.robust_segmentation`) with this warm start, as a known-f one.
+    """
+    Return our method (:func:`.robust_segmentation`) with this warm start, as a known-f one.
 
     ``None`` keeps a keyword's default (:data:`.robust.WARM_INLIERS`; the warm start competes).
     """
@@ -109,7 +111,8 @@ def robust_segmenter(init_labels: Optional[np.ndarray] = None,
 
 def solve_rotation(problem: Problem, method: str, segment: KnownFocal,
                    refine_with: Optional[KnownFocal] = None) -> SegmentationResult:
-    """Solve ``problem`` with the known-f segmentation ``segment``; the result names ``method``.
+    """
+    Solve ``problem`` with the known-f segmentation ``segment``; the result names ``method``.
 
     Unknown intrinsics: the focal length is estimated first (:func:`estimate_focal`), refined
     with ``refine_with`` (default: :func:`robust_segmenter` without a warm start).
@@ -134,7 +137,8 @@ def solve_rotation(problem: Problem, method: str, segment: KnownFocal,
 
 def estimate_focal(problem: Problem, rng: np.random.Generator, refine_with: KnownFocal
                    ) -> Tuple[float, Optional[float]]:
-    """Return the focal length (px) of a problem and its first-order estimate (or None).
+    """
+    Return the focal length (px) of a problem and its first-order estimate (or None).
 
     The first-order multibody estimate (:func:`.first_order_focal`), or a scan when it is
     undetermined or implausible (outside :data:`FOCAL_RANGE`), then two exact profile
@@ -159,7 +163,8 @@ def estimate_focal(problem: Problem, rng: np.random.Generator, refine_with: Know
 
 def _scan_focal(arr: np.ndarray, n: int, size: Tuple[float, float],
                 rng: np.random.Generator) -> float:
-    """Return the focal length whose known-f solution explains the tracks best (wide scan).
+    """
+    Return the focal length whose known-f solution explains the tracks best (wide scan).
 
     For when the paper's eq. (18) is undetermined (e.g. the sum of w1 and w2 over the bodies
     is ~ 0).
@@ -175,7 +180,8 @@ def _scan_focal(arr: np.ndarray, n: int, size: Tuple[float, float],
 
 def finish(flows: LineFlows, seg: Segmentation, focal: float, method: str,
            diagnostics: Diagnostics) -> SegmentationResult:
-    """Make the result of a segmentation: covariances, rotation vectors, residuals per track.
+    """
+    Make the result of a segmentation: covariances, rotation vectors, residuals per track.
 
     The covariances are at the noise level of ``diagnostics.sigma_px``, or estimated from the
     costs when it is not set.
@@ -207,7 +213,8 @@ def finish(flows: LineFlows, seg: Segmentation, focal: float, method: str,
 
 def _covariances(information: np.ndarray, jac: np.ndarray, sigma2: float, fitted: np.ndarray
                  ) -> np.ndarray:
-    """Covariances ``(n, 3, 3)`` of the bodies' rotation vectors; ``inf`` for the unfitted.
+    """
+    Covariances ``(n, 3, 3)`` of the bodies' rotation vectors; ``inf`` for the unfitted.
 
     ``information (n, 3, 3)``: information matrices of the Cayley vectors for 1 px noise; ``jac``:
     Jacobians of the rotation vectors; ``sigma2``: noise variance (px^2); ``fitted``: the
@@ -231,7 +238,8 @@ def _covariances(information: np.ndarray, jac: np.ndarray, sigma2: float, fitted
 
 
 def _argmin_nan_to_num(costs: np.ndarray) -> np.ndarray:
-    """``np.argmin(np.nan_to_num(costs, nan=np.inf), axis=1)`` of ``costs (M, n)``, ``(M,)``.
+    """
+    ``np.argmin(np.nan_to_num(costs, nan=np.inf), axis=1)`` of ``costs (M, n)``, ``(M,)``.
 
     The same mapping (nan to inf, +-inf to +-the largest float: inf ranks after it) in a few
     ufunc calls instead of nan_to_num's generic machinery.
@@ -246,7 +254,8 @@ _BIG = float(np.finfo(np.float64).max)
 def solve_robust(problem: Problem, init_labels: Optional[np.ndarray] = None,
                  warm_inliers: Optional[float] = None,
                  warm_competes: Optional[bool] = None) -> SegmentationResult:
-    """Solve ``problem`` with our method (``'robust'``); the focal length refined with it too.
+    """
+    Solve ``problem`` with our method (``'robust'``); the focal length refined with it too.
 
     ``init_labels`` (N,): the previous window's labels (``-1`` unknown, ids below n);
     ``warm_inliers``, ``warm_competes``: see :func:`.segment_lines`.

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Spatial coherence: lines near each other in the image tend to share a body.
+"""
+Spatial coherence: lines near each other in the image tend to share a body.
 
 Real rigid bodies are compact in the image, so a track's image neighbours are evidence for its
 label, which matters where the rotation-only model is only approximately right (bodies that
@@ -47,7 +48,8 @@ def _morton(q: np.ndarray) -> np.ndarray:
 
 def spatial_neighbours(points: np.ndarray, k: int = NEIGHBOURS, window: int = 16
                        ) -> np.ndarray:
-    """``k`` nearest neighbours ``(N, k)`` of ``points (N, 2)`` (px), never the point itself.
+    """
+    ``k`` nearest neighbours ``(N, k)`` of ``points (N, 2)`` (px), never the point itself.
 
     Exact up to :data:`EXACT_MAX` points. Beyond, approximate and linear in N: the candidates
     are the ``window`` points on either side along two shifted Z-order curves (recall of the
@@ -125,7 +127,8 @@ def label_coherence(labels: np.ndarray, neighbours: np.ndarray) -> float:
 
 
 def _coherence(agree: int, pairs: int, counts: np.ndarray) -> float:
-    """:func:`label_coherence` from the numbers of agreeing and of labelled neighbour pairs.
+    """
+    :func:`label_coherence` from the numbers of agreeing and of labelled neighbour pairs.
 
     ``counts``: tracks per label (trailing zeros allowed).
     """
@@ -138,7 +141,8 @@ def _coherence(agree: int, pairs: int, counts: np.ndarray) -> float:
 
 def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
                   weight: float = POTTS_WEIGHT, sweeps: int = 5) -> Tuple[np.ndarray, float]:
-    """Relabel the labelled tracks by costs plus a Potts term over image neighbours.
+    """
+    Relabel the labelled tracks by costs plus a Potts term over image neighbours.
 
     Parameters
     ----------
@@ -151,6 +155,8 @@ def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
     weight : float
         Penalty per disagreeing neighbour as a share of the median best cost of the labelled
         tracks, at full coherence (scaled by :func:`label_coherence`).
+    sweeps : int
+        Most passes over the tracks (each relabels every track given its neighbours).
 
     Returns
     -------
@@ -158,6 +164,7 @@ def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
         The smoothed labels.
     coupling : float
         The penalty per disagreeing neighbour that was used (cost units; 0 = unchanged).
+
     """
     lab = np.array(labels, dtype=np.int64)                           # a copy
     keep = lab >= 0

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Veronese embedding of degree n and its gradient, vectorised over rows and monomials.
+"""
+Veronese embedding of degree n and its gradient, vectorised over rows and monomials.
 
 The multibody constraint ``prod_i (y . u_i) = 0`` is linear in the monomials of ``y``:
 ``p(y) = nu_n(y) . U``. Monomials are ordered by descending exponent of ``y_0`` first
@@ -27,7 +28,8 @@ import numpy as np
 
 @lru_cache(maxsize=None)
 def exponents(n_vars: int, degree: int) -> np.ndarray:
-    """Exponent matrix ``(M, n_vars)`` int of all monomials of ``degree`` in ``n_vars`` variables.
+    """
+    Exponent matrix ``(M, n_vars)`` int of all monomials of ``degree`` in ``n_vars`` variables.
 
     ``M = C(degree + n_vars - 1, n_vars - 1)``, e.g. 10, 20, 35 for 4 variables and degree 2-4.
     """
@@ -48,7 +50,8 @@ def monomial_index(exps: np.ndarray, exponent) -> int:
 
 @lru_cache(maxsize=None)
 def _blocks(n_vars: int, degree: int) -> tuple:
-    """``(start, length)`` per variable ``j``: degree-n monomials are ``y_j`` times a tail.
+    """
+    ``(start, length)`` per variable ``j``: degree-n monomials are ``y_j`` times a tail.
 
     In the lexicographic order the degree-n monomials whose first variable is ``y_j`` form one
     block, ``y_j`` times the degree n-1 monomials free of ``y_0 .. y_(j-1)``, which are the
@@ -63,7 +66,8 @@ def _blocks(n_vars: int, degree: int) -> tuple:
 
 
 def _raise_degree(lower_t: np.ndarray, y_t: np.ndarray, degree: int) -> np.ndarray:
-    """Transposed monomials ``(M, R)`` of ``degree`` from those of ``degree - 1``, ``(M', R)``.
+    """
+    Transposed monomials ``(M, R)`` of ``degree`` from those of ``degree - 1``, ``(M', R)``.
 
     One elementwise product per variable of a contiguous block (no exponent tables, powers or
     gathers); transposed so that every block is contiguous in memory.
@@ -78,7 +82,8 @@ def _raise_degree(lower_t: np.ndarray, y_t: np.ndarray, degree: int) -> np.ndarr
 
 
 def embed(y: np.ndarray, degree: int, lower: Optional[np.ndarray] = None) -> np.ndarray:
-    """Veronese map ``nu_n``: rows ``(R, D)`` -> ``(R, M)`` monomials of ``degree``.
+    """
+    Veronese map ``nu_n``: rows ``(R, D)`` -> ``(R, M)`` monomials of ``degree``.
 
     ``lower``: ``embed(y, degree - 1)`` when already computed. Every monomial of degree d is
     one product of a variable and a degree d-1 monomial, so the degrees are built in turn: one
@@ -99,7 +104,8 @@ def embed(y: np.ndarray, degree: int, lower: Optional[np.ndarray] = None) -> np.
 
 @lru_cache(maxsize=None)
 def _derivative_map(n_vars: int, degree: int) -> Tuple[np.ndarray, np.ndarray]:
-    """Column ``(M', D)`` of ``y_j m_l`` in the degree-n embedding and its exponent of ``y_j``.
+    """
+    Column ``(M', D)`` of ``y_j m_l`` in the degree-n embedding and its exponent of ``y_j``.
 
     ``m_l`` runs over the degree n-1 monomials: ``d/dy_j`` of the degree-n monomial
     ``y_j m_l`` is ``(e_lj + 1) m_l``.
@@ -120,7 +126,8 @@ def _derivative_map(n_vars: int, degree: int) -> Tuple[np.ndarray, np.ndarray]:
 
 def gradient(y: np.ndarray, coeffs: np.ndarray, degree: int,
              lower: Optional[np.ndarray] = None) -> np.ndarray:
-    """Gradient ``(R, D)`` of ``p(y) = nu_n(y) . coeffs`` at every row of ``y``.
+    """
+    Gradient ``(R, D)`` of ``p(y) = nu_n(y) . coeffs`` at every row of ``y``.
 
     Every partial derivative is a degree n-1 polynomial: ``d/dy_j p = sum_l (e_lj + 1)
     U[y_j m_l] m_l``, so the gradient is one product of the degree n-1 monomials ``(R, M')``
@@ -137,7 +144,8 @@ def gradient(y: np.ndarray, coeffs: np.ndarray, degree: int,
 
 
 def structural_zeros(rows: np.ndarray, degree: int, tol: float = 0.0) -> np.ndarray:
-    """Boolean ``(M,)`` mask of monomials that vanish on every row (the paper's ``Z_n``).
+    """
+    Boolean ``(M,)`` mask of monomials that vanish on every row (the paper's ``Z_n``).
 
     A coordinate that is zero by construction in one row type makes every monomial mixing it
     with a coordinate that is zero in the other row type vanish identically; such columns carry

@@ -23,10 +23,9 @@ same line as an older one is dropped as a duplicate.
 """
 from typing import NamedTuple, Tuple
 
-import numpy as np
-
 from mlofc_ros.segments.common import angle_pairs
 from mlofc_ros.tracks.edges import tls_by_group
+import numpy as np
 
 #: Association gates: angle between lines (deg), distance of the detection's endpoints to the
 #: track's line (px), overlap along the line over the shorter segment's length.

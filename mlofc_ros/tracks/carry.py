@@ -28,10 +28,9 @@ the next detection.
 from typing import Tuple
 
 import cv2
-import numpy as np
-
 from mlofc_ros.tracks.edges import grow_lines, refine_lines, tls_rows
 from mlofc_ros.tracks.frames import Frames, KLT_SCALE
+import numpy as np
 
 #: KLT points per track, the LK window (px of the reduced image) and pyramid levels.
 N_POINTS = 4

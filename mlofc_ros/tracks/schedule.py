@@ -37,11 +37,10 @@ import math
 from typing import Optional, Tuple
 
 import cv2
-import numpy as np
-
 from mlofc_ros.segments.common import square_kernel
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.frames import Frames, KLT_SCALE
+import numpy as np
 
 #: A detection finding at most this share of the live tracks as new segments (per
 #: ``detect_every`` frames) is quiet: the interval doubles.

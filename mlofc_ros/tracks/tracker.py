@@ -31,8 +31,6 @@ born with (the detector's: brighter side on the left).
 from typing import Dict, Optional, Tuple
 
 import cv2
-import numpy as np
-
 from mlofc_ros.segments.common import check_gray
 from mlofc_ros.segments.detect import LineDetector
 from mlofc_ros.tracks import associate as assoc
@@ -41,6 +39,7 @@ from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.frames import Frames
 from mlofc_ros.tracks.schedule import DetectionSchedule
 from mlofc_ros.tracks.state import TrackSet
+import numpy as np
 
 #: Consecutive frames a track may be neither carried nor detected before it retires.
 MAX_MISSES = 2

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Map pixels of the distorted camera image to the undistorted pinhole image with the same K.
+"""
+Map pixels of the distorted camera image to the undistorted pinhole image with the same K.
 
 Straight 3D lines image as straight lines only in the undistorted image, so the solver takes
 segments after :func:`undistort_segments`. The output image uses the camera's own intrinsics as
@@ -21,9 +22,8 @@ normalised ray ``(x, y, 1)`` in the camera optical frame (x right, y down, z for
 from typing import Optional, Tuple
 
 import cv2
-import numpy as np
-
 from mlofc_ros.camera import CameraModel
+import numpy as np
 
 #: Default iteration criteria: tighter than OpenCV's default (5 iterations), so the result
 #: reprojects through ``cv2.projectPoints`` to well under 1e-3 px for usual lenses.
@@ -47,7 +47,8 @@ def _undistort_points_iter(src: np.ndarray, K: np.ndarray, d: np.ndarray,  # noq
 
 def undistort_points(points: np.ndarray, camera: CameraModel,
                      criteria: Criteria = CRITERIA) -> np.ndarray:
-    """Undistort pixel points (N, 2) ``(u, v)`` of ``camera``; return (N, 2) float64 px.
+    """
+    Undistort pixel points (N, 2) ``(u, v)`` of ``camera``; return (N, 2) float64 px.
 
     Output pixels are in the undistorted pinhole image with the same ``K``. Models:
     ``plumb_bob`` (5 coefficients) and ``rational_polynomial`` (8, or 5) via
@@ -81,7 +82,8 @@ def undistort_points(points: np.ndarray, camera: CameraModel,
 
 def undistort_segments(segments: np.ndarray, camera: CameraModel,
                        criteria: Criteria = CRITERIA) -> np.ndarray:
-    """Undistort both endpoints of segments (M, 4) ``(u1, v1, u2, v2)`` px; return (M, 4) f64.
+    """
+    Undistort both endpoints of segments (M, 4) ``(u1, v1, u2, v2)`` px; return (M, 4) f64.
 
     See :func:`undistort_points` for the models and the output image (``P = K``). Identity
     (a float64 copy) when the camera has no distortion.

@@ -18,7 +18,8 @@ import numpy as np
 
 
 class TrackWindow:
-    """Ring buffer of the last ``size`` frames of ``(track_ids, segments)``.
+    """
+    Ring buffer of the last ``size`` frames of ``(track_ids, segments)``.
 
     Each :meth:`push` stores one frame (ids sorted, in preallocated arrays that grow by doubling
     when a frame has more tracks than ever before); :meth:`tracks` lays the window out as one
@@ -39,7 +40,7 @@ class TrackWindow:
 
     @property
     def fill(self) -> int:
-        """Number of frames held (0 .. size)."""
+        """Return the number of frames held (0 .. size)."""
         return self._fill
 
     def reset(self) -> None:
@@ -60,7 +61,8 @@ class TrackWindow:
         self._ids, self._seg = ids, seg
 
     def push(self, track_ids: np.ndarray, segments: np.ndarray) -> None:
-        """Append one frame: ``track_ids`` (M,) unsigned ints, ``segments`` (M, 4) px.
+        """
+        Append one frame: ``track_ids`` (M,) unsigned ints, ``segments`` (M, 4) px.
 
         The oldest frame drops out once ``size`` frames are held. Raises ``ValueError`` on
         mismatched lengths, a wrong segment shape, or a repeated id within the frame.
@@ -96,7 +98,8 @@ class TrackWindow:
         return (self._head - self._fill + np.arange(self._fill)) % self.size
 
     def tracks(self, min_frames: int = 2) -> Tuple[np.ndarray, np.ndarray]:
-        """Lay out the window: ``(ids (N,) uint32, window (N, K, 4) float64)``.
+        """
+        Lay out the window: ``(ids (N,) uint32, window (N, K, 4) float64)``.
 
         ``K`` is :attr:`fill`, column ``K - 1`` is the newest frame; rows are sorted by id and
         hold only tracks present in at least ``min_frames`` of the K frames. Entries of frames

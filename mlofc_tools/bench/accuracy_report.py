@@ -17,12 +17,11 @@ import math
 import os
 from typing import Dict, List, Sequence, Tuple
 
-import numpy as np
-
 from mlofc_tools.bench import common
 from mlofc_tools.bench.accuracy_runs import (AUTO, BROKEN, COLORS, FLOOR, FLOOR_W, Grid,
                                              LINES_PER_BODY, ORACLE, OUTLIER_FRACTION, Raw)
 from mlofc_tools.synthetic import JITTER_PX, MIXES
+import numpy as np
 
 
 #: Goals of the accuracy issue.

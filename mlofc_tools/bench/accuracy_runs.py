@@ -22,12 +22,10 @@ import time
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import mlofc_ros  # noqa: F401 (first of the package: one BLAS thread, set before numpy loads)
-
-import numpy as np  # noqa: I100 (numpy must load after mlofc_ros, see above)
-
 from mlofc_tools.bench import common
 from mlofc_tools.scoring import best_permutation, motion_errors
 from mlofc_tools.synthetic import add_outliers, make_scene, MIXES
+import numpy as np  # noqa: I100 (numpy must load after mlofc_ros, see above)
 
 
 FLOOR = 'floor (unweighted)'

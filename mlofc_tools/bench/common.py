@@ -29,10 +29,9 @@ import sys
 import time
 from typing import Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
-import numpy as np
-
 # re-exported: benchmarks score through common
 from mlofc_tools.scoring import best_permutation, misclassification, motion_errors  # noqa: F401
+import numpy as np
 
 #: ``docs/results`` of the source checkout this module lives in.
 REPO_RESULTS_DIR = pathlib.Path(__file__).resolve().parents[2] / 'docs' / 'results'
@@ -179,11 +178,15 @@ def markdown_table(headers: Sequence[str], rows: Iterable[Sequence[object]],
 
     Parameters
     ----------
-    headers : column titles.
-    rows : rows of cells (str, int or float; floats via :func:`format_number`).
-    align : one character per column, ``l``/``r``/``c``; default first column left, others
-        right.
-    digits : significant digits of float cells.
+    headers
+        Column titles.
+    rows
+        Rows of cells (str, int or float; floats via :func:`format_number`).
+    align
+        One character per column, ``l``/``r``/``c``; default first column left, others right.
+    digits
+        Significant digits of float cells.
+
     """
     headers = list(headers)
     align = align or 'l' + 'r' * (len(headers) - 1)

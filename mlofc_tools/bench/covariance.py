@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Is the published angular-velocity covariance honest? NEES on rendered scenes.
+"""
+Is the published angular-velocity covariance honest? NEES on rendered scenes.
 
 Run ``python -m mlofc_tools.bench covariance``; writes ``docs/results/covariance/``. The scenes
 of ``bench spinning`` go through :class:`~mlofc_ros.pipeline.Pipeline` (30 frames, every frame
@@ -37,9 +38,8 @@ import math
 import time
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
-
 from mlofc_tools.bench import common, spinning
+import numpy as np
 
 #: chi-square quantiles, 3 degrees of freedom: median and 95%.
 CHI2_3_MEDIAN, CHI2_3_95 = 2.366, 7.815

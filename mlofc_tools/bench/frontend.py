@@ -28,14 +28,13 @@ import time
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import cv2
-import numpy as np
-
 from mlofc_ros.segments.detect import has_ximgproc, LineDetector
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_tools.bench import common
 from mlofc_tools.datasets.shared import shared_data_dir
 from mlofc_tools.scoring import match_to_truth, score_tracks
+import numpy as np
 
 #: Real sequences (no ground truth), see ``/work/shared/data/real/README.md``.
 REAL_DIR = os.environ.get('MLOFC_REAL_DIR', str(shared_data_dir() / 'real'))

@@ -17,14 +17,13 @@ import math
 import pathlib
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
-
 from mlofc_tools.bench import common
 from mlofc_tools.bench.hopkins_runs import (BENCH_GROUPS, checkerboard_motion, F_SPAN,
                                             LINES_PER_MOTION, LOOSE, LOOSE_BOUND, MAX_USES,
                                             MIN_LENGTH_PX, ORACLE, ORACLE_G, ORACLE_GF,
                                             ORACLE_U, REASSIGNED, REFERENCES,
                                             ROBUST_ORACLE_F, TICK_NAMES, WITH_OUTLIERS)
+import numpy as np
 
 
 def per_sequence(records: Sequence[Dict[str, object]]

@@ -24,10 +24,9 @@ import time
 from typing import Dict, List, Optional, Sequence, Tuple
 import zlib
 
-import numpy as np
-
 from mlofc_tools.datasets import hopkins as hk
 from mlofc_tools.scoring import misclassification
+import numpy as np
 
 
 ORACLE = 'oracle (weighted)'

@@ -11,7 +11,8 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""Hopkins155 line tracks streamed through `general`'s warm path, as the node solves them.
+"""
+Hopkins155 line tracks streamed through `general`'s warm path, as the node solves them.
 
 ``python -m mlofc_tools.bench hopkins_stream [--motions 3] [--sequences ...] [--out DIR]``
 writes ``README.md`` to ``docs/results/hopkins_stream/`` (or ``--out``), prints it
@@ -40,12 +41,11 @@ import time
 from typing import Dict, List, Optional, Sequence
 import zlib
 
-import numpy as np
-
 from mlofc_tools.bench import common
 from mlofc_tools.bench.hopkins_runs import (LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX,
                                             n_motions_of, pick_sequences)
 from mlofc_tools.datasets import hopkins as hk
+import numpy as np
 
 #: Frames per window (`bench hopkins`'s K = 5).
 K = 5
@@ -56,7 +56,8 @@ QUICK_SEQUENCE = 'three-cars'
 
 def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
                     cold: bool = True) -> Dict[str, object]:
-    """Stream one sequence through the warm path; per-window misclassification (worker).
+    """
+    Stream one sequence through the warm path; per-window misclassification (worker).
 
     ``windows``: stop after this many (default: to the end of the sequence); ``cold=False``
     skips the cold reference solves.

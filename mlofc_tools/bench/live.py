@@ -39,12 +39,11 @@ import time
 from types import SimpleNamespace
 from typing import Any, Dict, List, Optional, Sequence
 
-import numpy as np
-
 # importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
 from mlofc_tools.bench import common
 from mlofc_tools.bench import ros as bench_ros
 from mlofc_tools.bench import spinning
+import numpy as np
 
 TWIST_TOPIC = '/' + bench_ros.NODE_NAME + '/body_{}/twist'
 

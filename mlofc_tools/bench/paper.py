@@ -39,11 +39,10 @@ import os
 import time
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
-
 from mlofc_tools.bench import common
 from mlofc_tools.scoring import best_permutation, motion_errors
 from mlofc_tools.synthetic import make_scene
+import numpy as np
 
 FLOOR = 'floor (unweighted)'
 FLOOR_W = 'floor (weighted)'

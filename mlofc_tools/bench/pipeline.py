@@ -42,11 +42,10 @@ import time
 from types import SimpleNamespace
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
-
 # importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
 from mlofc_tools.bench import common
 from mlofc_tools.datasets.shared import shared_data_dir
+import numpy as np
 
 REAL_DIR = os.environ.get('MLOFC_REAL_DIR', str(shared_data_dir() / 'real'))
 

@@ -43,10 +43,9 @@ import threading
 import time
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple, Union
 
-import numpy as np
-
 # importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
 from mlofc_tools.bench import common
+import numpy as np
 
 NODE_NAME = 'mlofc'
 IMAGE_TOPIC = '/bench/image_raw'

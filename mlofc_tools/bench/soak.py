@@ -30,10 +30,9 @@ import sys
 import time
 from typing import Dict, List, Optional, Sequence
 
-import numpy as np
-
 # importing any mlofc_ros module first runs mlofc_ros/__init__ (one BLAS thread)
 from mlofc_tools.bench import common
+import numpy as np
 
 
 def rss_mb(field: str = 'VmRSS') -> float:

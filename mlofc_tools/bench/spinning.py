@@ -48,9 +48,8 @@ import math
 import time
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
-
 from mlofc_tools.bench import common
+import numpy as np
 
 #: Scenes: name -> (motion, boxes, background).
 SCENES = {

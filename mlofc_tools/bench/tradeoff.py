@@ -43,11 +43,10 @@ import sys
 import time
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
-
 from mlofc_tools.bench import common, frontend
 from mlofc_tools.bench.frontend import SWITCH_GOAL_PCT, TRACKED_GOAL
 from mlofc_tools.scoring import score_tracks
+import numpy as np
 
 #: Issue #7's speed goal: ``Pipeline.process`` / LSD alone, here on the means.
 SPEED_GOAL = 0.5

@@ -38,9 +38,8 @@ import pathlib
 import re
 from typing import List, Optional, Tuple, Union
 
-import numpy as np
-
 from mlofc_tools.datasets.shared import shared_data_dir
+import numpy as np
 
 PathLike = Union[str, 'os.PathLike[str]']
 
@@ -77,6 +76,7 @@ def sequence_group(name: str) -> str:
     ------
     ValueError
         The name is none of the above.
+
     """
     base = parent_name(name)
     if base[:1].isdigit() or base == 'three-cars':
@@ -109,6 +109,7 @@ class HopkinsSequence:
         Frame size in pixels.
     n_motions : int
         Number of distinct motions (2 or 3 in the benchmark, 5 for ``dancing``).
+
     """
 
     name: str
@@ -121,12 +122,12 @@ class HopkinsSequence:
 
     @property
     def n_frames(self) -> int:
-        """Number of frames F."""
+        """Return the number of frames F."""
         return int(self.points.shape[0])
 
     @property
     def n_points(self) -> int:
-        """Number of tracked points P."""
+        """Return the number of tracked points P."""
         return int(self.points.shape[1])
 
     @property
@@ -136,7 +137,7 @@ class HopkinsSequence:
 
     @property
     def is_subset(self) -> bool:
-        """True for the ``_g12``/``_g13``/``_g23`` two-motion subsets of 3-motion sequences."""
+        """Return whether this is a ``_g12``/``_g13``/``_g23`` subset of a 3-motion sequence."""
         return parent_name(self.name) != self.name
 
 
@@ -148,6 +149,7 @@ def load_sequence(path: PathLike) -> HopkinsSequence:
     ------
     ValueError
         Missing keys, inconsistent shapes, or non-finite coordinates.
+
     """
     path = pathlib.Path(path)
     with np.load(path) as z:
@@ -179,6 +181,7 @@ def list_sequences(data_dir: Optional[PathLike] = None, include_extra: bool = Fa
     ------
     ValueError
         The folder does not exist or holds no ``.npz`` file.
+
     """
     folder = pathlib.Path(data_dir) if data_dir is not None else DEFAULT_DATA_DIR
     if not folder.is_dir():
@@ -245,13 +248,20 @@ def pair_points(seq: HopkinsSequence, n_lines_per_motion: int = 30, start: int =
 
     Parameters
     ----------
-    seq : the sequence.
-    n_lines_per_motion : cap on the number of lines per motion (the paper's m).
-    start : frame in which the minimum length is checked (first frame of the window).
-    min_length_px : shortest allowed segment, pixels.
-    seed : seed of the random order; the result repeats for a seed.
-    strategy : ``'random'`` or ``'long'``.
-    max_uses : the most lines a point may belong to.
+    seq
+        The sequence.
+    n_lines_per_motion
+        Cap on the number of lines per motion (the paper's m).
+    start
+        Frame in which the minimum length is checked (first frame of the window).
+    min_length_px
+        Shortest allowed segment, pixels.
+    seed
+        Seed of the random order; the result repeats for a seed.
+    strategy
+        ``'random'`` or ``'long'``.
+    max_uses
+        The most lines a point may belong to.
 
     Returns
     -------
@@ -264,6 +274,7 @@ def pair_points(seq: HopkinsSequence, n_lines_per_motion: int = 30, start: int =
     ------
     ValueError
         Unknown strategy, ``start`` outside the sequence, or a non-positive cap.
+
     """
     if strategy not in STRATEGIES:
         raise ValueError(f'unknown pairing strategy {strategy!r}; choose from {STRATEGIES}')
@@ -307,9 +318,12 @@ def line_tracks(seq: HopkinsSequence, n_lines_per_motion: int = 30,
 
     Parameters
     ----------
-    seq : the sequence.
-    n_lines_per_motion, min_length_px, seed, strategy, max_uses : see :func:`pair_points`.
-    frames : ``(start, K)``: K >= 2 consecutive frames from ``start``; None = all frames.
+    seq
+        The sequence.
+    n_lines_per_motion, min_length_px, seed, strategy, max_uses
+        As in :func:`pair_points`.
+    frames
+        ``(start, K)``: K >= 2 consecutive frames from ``start``; None = all frames.
 
     Returns
     -------
@@ -322,6 +336,7 @@ def line_tracks(seq: HopkinsSequence, n_lines_per_motion: int = 30,
     ------
     ValueError
         The window does not fit in the sequence or K < 2; see also :func:`pair_points`.
+
     """
     start, k = (0, seq.n_frames) if frames is None else (int(frames[0]), int(frames[1]))
     if k < 2 or start < 0 or start + k > seq.n_frames:

@@ -25,13 +25,12 @@ import math
 from typing import List, Optional, Sequence, Tuple
 
 import cv2
-import numpy as np
-
 from mlofc_ros.camera import as_camera, CameraLike, CameraModel
 from mlofc_tools.render.geometry import distort_pixels
 from mlofc_tools.render.raster import offset_polygons, SHIFT, to_fixed
 from mlofc_tools.render.scene import Body, make_background, place_boxes
 from mlofc_tools.render.truth import visible_segments
+import numpy as np
 
 MOTIONS = ('camera_centre', 'own_centre')
 
@@ -41,14 +40,21 @@ class FrameTruth:
     """
     Ground-truth line segments of one frame (``L`` visible 3D edges).
 
-    Attributes:
-      segments: (L, 4) float64 ``(u1, v1, u2, v2)`` px, the longest visible part of each
+    Attributes
+    ----------
+    segments
+        (L, 4) float64 ``(u1, v1, u2, v2)`` px, the longest visible part of each
         projected straight 3D edge in the undistorted pinhole image.
-      segments_distorted: (L, 4) float64, the same endpoints mapped through the lens
+    segments_distorted
+        (L, 4) float64, the same endpoints mapped through the lens
         distortion (equal to ``segments`` without distortion; the segment itself is curved).
-      body_ids: (L,) int64 index into ``RenderedSequence.angular_velocities``.
-      edge_ids: (L,) int64 persistent id of the 3D edge (the same in every frame).
-      visible_fraction: (L,) float64 in (0, 1], visible share of the edge's whole projection.
+    body_ids
+        (L,) int64 index into ``RenderedSequence.angular_velocities``.
+    edge_ids
+        (L,) int64 persistent id of the 3D edge (the same in every frame).
+    visible_fraction
+        (L,) float64 in (0, 1], visible share of the edge's whole projection.
+
     """
 
     segments: np.ndarray
@@ -63,16 +69,26 @@ class RenderedSequence:
     """
     A rendered sequence and its ground truth (``F`` frames, ``B`` bodies).
 
-    Attributes:
-      frames: ``F`` gray images (H, W) uint8 (distorted when the camera has distortion).
-      stamps: (F,) float64 seconds, frame ``i`` at ``i / fps``.
-      camera: the :class:`CameraModel` (K and distortion) of ``frames``.
-      angular_velocities: (B, 3) float64 rad/s, camera optical frame, per body id.
-      body_names: ``B`` names, ``['background', 'box0', ...]`` (no background if disabled).
-      truth: ``F`` :class:`FrameTruth`.
-      pivots: (B, 3) float64 rotation pivot of each body, camera frame (scene units).
-      pinhole_frames: with distortion, the noise-free undistorted pinhole renderings (H, W)
+    Attributes
+    ----------
+    frames
+        ``F`` gray images (H, W) uint8 (distorted when the camera has distortion).
+    stamps
+        (F,) float64 seconds, frame ``i`` at ``i / fps``.
+    camera
+        the :class:`CameraModel` (K and distortion) of ``frames``.
+    angular_velocities
+        (B, 3) float64 rad/s, camera optical frame, per body id.
+    body_names
+        ``B`` names, ``['background', 'box0', ...]`` (no background if disabled).
+    truth
+        ``F`` :class:`FrameTruth`.
+    pivots
+        (B, 3) float64 rotation pivot of each body, camera frame (scene units).
+    pinhole_frames
+        with distortion, the noise-free undistorted pinhole renderings (H, W)
         uint8 that ``frames`` were warped from; None without distortion.
+
     """
 
     frames: List[np.ndarray]
@@ -241,20 +257,32 @@ def render_sequence(n_boxes: int = 2, n_frames: int = 20, size: Tuple[int, int] 
     """
     Render ``n_frames`` gray frames of ``n_boxes`` rotating striped boxes, with ground truth.
 
-    Args:
-      n_boxes: 1..4 cuboids (depth 4..8 scene units, laid out so they stay apart in the image).
-      n_frames: number of frames (>= 1), frame ``i`` at ``i / fps`` seconds.
-      size: ``(width, height)`` px.
-      motion: ``'camera_centre'`` (rotation about the camera centre: pure rotation) or
+    Parameters
+    ----------
+    n_boxes
+        1..4 cuboids (depth 4..8 scene units, laid out so they stay apart in the image).
+    n_frames
+        number of frames (>= 1), frame ``i`` at ``i / fps`` seconds.
+    size
+        ``(width, height)`` px.
+    motion
+        ``'camera_centre'`` (rotation about the camera centre: pure rotation) or
         ``'own_centre'`` (each box spins about its own centre, no translation of the centre).
-      background: add a static striped wall at depth ~12 (body 0, omega 0).
-      noise_sigma: std of additive Gaussian sensor noise, grey levels.
-      fps: frame rate, Hz.
-      seed: random seed (scene and noise); the same seed renders the same sequence.
-      camera: :class:`CameraModel` or ``(fx, fy, cx, cy)``; default ``fx = fy = 0.9 width``
+    background
+        add a static striped wall at depth ~12 (body 0, omega 0).
+    noise_sigma
+        std of additive Gaussian sensor noise, grey levels.
+    fps
+        frame rate, Hz.
+    seed
+        random seed (scene and noise); the same seed renders the same sequence.
+    camera
+        :class:`CameraModel` or ``(fx, fy, cx, cy)``; default ``fx = fy = 0.9 width``
         with the principal point at the image centre ``((W - 1) / 2, (H - 1) / 2)``.
-      angular_speed_deg_s: ``(min, max)`` of the uniform box rotation speeds, deg/s.
-      distortion: plumb_bob ``(k1, k2, p1, p2, k3)``; frames then show the distortion
+    angular_speed_deg_s
+        ``(min, max)`` of the uniform box rotation speeds, deg/s.
+    distortion
+        plumb_bob ``(k1, k2, p1, p2, k3)``; frames then show the distortion
         (rendered as pinhole, warped with ``cv2.remap``) and ``camera.d`` carries it.
 
     The scene is planned over the whole sequence: for ``'camera_centre'`` the boxes' mid-sequence
@@ -265,6 +293,7 @@ def render_sequence(n_boxes: int = 2, n_frames: int = 20, size: Tuple[int, int] 
     from ``seed`` for every frame (this resets the calling thread's ``cv2.theRNG``).
 
     Raises ``ValueError`` naming a bad argument.
+
     """
     if not 1 <= int(n_boxes) <= 4:
         raise ValueError(f'n_boxes must be 1..4, got {n_boxes}')

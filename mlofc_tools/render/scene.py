@@ -25,10 +25,9 @@ from dataclasses import dataclass
 import math
 from typing import List, Optional, Sequence, Tuple
 
-import numpy as np
-
 from mlofc_tools.render.geometry import (clip_convex_polygon, random_rotation, so3_exp,
                                          so3_exp_many)
+import numpy as np
 
 #: Multipliers of a face's albedo: plain face, band of direction 1, direction 2, crossing.
 BOX_PATTERN = (1.0, 0.3, 0.6, 0.12)

@@ -22,9 +22,8 @@ The longest run of visible samples is the reported segment.
 """
 from typing import Optional, Sequence, Tuple
 
-import numpy as np
-
 from mlofc_tools.render.geometry import clip_segments_to_rect, distort_pixels
+import numpy as np
 
 #: Sample spacing along an edge, px (occlusion ends are accurate to about this).
 STEP_PX = 1.0
@@ -45,18 +44,26 @@ def visible_segments(p1: np.ndarray, p2: np.ndarray, faces: np.ndarray, id_buffe
     """
     Longest visible run of every projected edge.
 
-    Args:
-      p1, p2: (N, 2) float64 projected (undistorted pinhole) endpoints, px.
-      faces: (N, 2) int global face ids the edge bounds (-1 for none).
-      id_buffer: (Hc, Wc) int32 face id of every canvas pixel (-1 empty); canvas pixel
+    Parameters
+    ----------
+    p1, p2
+        (N, 2) float64 projected (undistorted pinhole) endpoints, px.
+    faces
+        (N, 2) int global face ids the edge bounds (-1 for none).
+    id_buffer
+        (Hc, Wc) int32 face id of every canvas pixel (-1 empty); canvas pixel
         ``(i, j)`` is image pixel ``(u0 + j, v0 + i)``.
-      origin: ``(u0, v0)`` of the canvas in image pixels.
-      image_size: ``(width, height)`` of the output image.
-      K, dist: with plumb_bob ``dist``, a sample is also required to land inside the
+    origin
+        ``(u0, v0)`` of the canvas in image pixels.
+    image_size
+        ``(width, height)`` of the output image.
+    K, dist
+        with plumb_bob ``dist``, a sample is also required to land inside the
         distorted output image.
 
     Returns ``(segments (N, 4) px, visible_fraction (N,), ok (N,) bool)``; rows with ``ok``
     False have no visible run of at least :data:`MIN_LENGTH_PX`.
+
     """
     n = len(p1)
     seg = np.zeros((n, 4))
