@@ -519,7 +519,7 @@ def test_body_ids_follow_tracks_whatever_the_solver_numbering():
 
 
 def test_body_ids_survive_a_few_windows_of_wrong_labels():
-    # session 20, own3+bg render seed 3 over 300 frames: for ~20 windows a box fitted in a
+    # seen on own3+bg, render seed 3, over 300 frames: for ~20 windows a box fitted in a
     # wrong basin took its neighbours' lines, the last labels rotated through the ids, and the
     # ids stayed permuted after the solver recovered (38% of the segments under a wrong id)
     bt = BodyTracker()

@@ -37,8 +37,8 @@ from .rotation import solve_robust
 from .spatial import spatial_neighbours
 
 #: How the method runs its rotation-only step: the robust solve without a lowered bar for the
-#: warm start and without the warm start competing with the search (the session-17 changes,
-#: tuned for 'robust' alone): bench live's own3+bg at 10 Hz, whose runs swing by 5-10 points,
+#: warm start and without the warm start competing with the search (both tuned for 'robust'
+#: alone): bench live's own3+bg at 10 Hz, whose runs swing by 5-10 points,
 #: was 12.6-14.7% wrong in three runs with one or both, against 5.3-7.4% in four without. The
 #: pipeline's stand-in for the method's first frames is run the same way
 #: (:data:`.methods.ROTATION_STEP`).
@@ -61,23 +61,22 @@ POLISH_ITERATIONS = 10
 #: mislabelled lines hardly pull. Spinning benchmark (window 10, render seeds 0-5, the same
 #: labels), boxes with omega within 5% own2+bg / own3+bg / own3: 7 / 14 / 13 -> 9 / 17 / 18
 #: of 12 / 18 / 18, median error 2 / 3 / 2 -> 0 / 1 / 1%, for one more refit per body per
-#: frame (session 19, docs/design.md). None: publish the segmentation's motion.
+#: frame (docs/design/general.md). None: publish the segmentation's motion.
 PUBLISH_NOISE_SCALE: Optional[float] = 0.01
 
 #: A rescanned body (``rescan`` of :func:`.segment_lines`) takes the pivot search's fit
 #: whenever it is cheaper than the tracked one by this share of its cost. The final refit of
 #: every body and the rescan's pivot search and comparison use the robust (Cauchy) line cost
 #: at the measured noise, the warm and segmentation fits least squares (the robust cost in
-#: every fit as well, helper branch h33, was not adopted: 4.2 / 9.4 / 6.4 / 8.8 -> 7.8 / 11.9
-#: / 2.7 / 1.5 on an earlier front end, better without a background body and worse with one;
-#: design.md). Spinning benchmark, window 10, six seeds, mean wrong % own2+bg / own3+bg /
+#: every fit as well measured 4.2 / 9.4 / 6.4 / 8.8 -> 7.8 / 11.9 / 2.7 / 1.5 on an earlier
+#: front end: better without a background body and worse with one). Spinning benchmark, window 10, six seeds, mean wrong % own2+bg / own3+bg /
 #: own2 / own3, least squares -> robust: 4.6 / 16.9 / 2.1 / 9.8 -> 4.0 / 13.3 / 1.6 / 5.3
 #: (margin 0; 3.1 / 17.4 / 1.7 / 7.8 with 0.1, which kept own3+bg seed 4 in a wrong basin,
 #: 32% wrong, 13% with none: the robust cost makes a wrong basin only ~10% dearer), cam2+bg
-#: 0.09 -> 0.10 (design.md, session 10, h34). The pivot search refines the best start of
+#: 0.09 -> 0.10. The pivot search refines the best start of
 #: every rate, not the best four overall (:func:`.general.pivot_picks`): a body fitted as
 #: nearly static, its flow explained by a translation, ranks the starts at its true rate low
-#: before any LM step (session 23; render seeds 0-11, 3.13 / 4.72 / 0.18 / 1.09 -> 2.08 /
+#: before any LM step (render seeds 0-11, 3.13 / 4.72 / 0.18 / 1.09 -> 2.08 /
 #: 4.29 / 0.21 / 0.50, boxes with omega within 5% 106 -> 108 of 120, ~+6-10% CPU per frame;
 #: the cold search keeps the global ranking: the best four plus the best of every rate there
 #: took the 35 three-motion Hopkins155 sequences from 10.5 to 10.7%).
@@ -88,7 +87,7 @@ RESCAN_MARGIN = 0.0
 #: uses :data:`.general.POSITION_WEIGHT`). Spinning benchmark, window 10, mean wrong % own2+bg
 #: / own3+bg / own2 / own3 over render seeds 0-5: none 6.5 / 10.6 / 1.6 / 5.2, 0.5 2.8 / 9.8 /
 #: 0.7 / 6.0, 1.0 2.3 / 10.5 / 0.4 / 3.0, 2.0 7.6 / 7.5 / 0.1 / 2.5; held-out seeds 6-8:
-#: none 3.3 / 9.1 / 0.4 / 3.9, 1.0 3.4 / 3.8 / 0.0 / 0.5; cam2+bg 0.10 -> 0.07 (session 13).
+#: none 3.3 / 9.1 / 0.4 / 3.9, 1.0 3.4 / 3.8 / 0.0 / 0.5; cam2+bg 0.10 -> 0.07.
 WARM_POSITION_WEIGHT = 1.0
 
 
@@ -145,10 +144,10 @@ def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarr
     The lines are assigned at the previous motions as they are (a few LM steps on the flat
     fitted-direction model moved a body with few lines into another basin: own2+bg s2, frame
     212, 137 -> 28 deg/s about y; it lost its lines to a neighbour and the ids came back
-    permuted 20 frames later; session 14, render seeds 0-2 over 300 frames, own2+bg / own3+bg
+    permuted 20 frames later; render seeds 0-2 over 300 frames, own2+bg / own3+bg
     11.6 / 28.0 -> 1.2 / 3.2% wrong), and the marginalised segmentation starts from them.
     Starts: the previous labels where the tracks had one (the assignment for the others), and
-    every track assigned at the previous motions; the lower score is kept (session 28: the
+    every track assigned at the previous motions; the lower score is kept (the
     fitted-direction costs carry little first-order information at short windows and right
     groupings fell apart in the next windows, Hopkins155 streamed 23.3 -> 10.6%; the
     reassigned start repairs groupings a wrong first search left: spinning seeds 0-11, wrong %

@@ -155,7 +155,7 @@ ROTATION_STEP = replace(ROBUST, keywords=frozenset({'init_labels'}),
 #: benchmark, window 10, mean wrong % own2+bg / own3+bg / own2 / own3 over render seeds 0-5
 #: (3 -> 5): 2.3 / 10.4 / 0.4 / 3.0 -> 3.8 / 5.5 / 0.4 / 2.6, held-out seeds 6-8 3.4 / 3.8 /
 #: 0.0 / 0.5 -> 1.5 / 3.1 / 0.0 / 0.1; 4 frames (3.1 / 10.2 / 0.5 / -) and the whole window
-#: (10: 4.3 / 22.6 / 1.1 / 0.4) were worse (session 13).
+#: (10: 4.3 / 22.6 / 1.1 / 0.4) were worse.
 GENERAL_MIN_FRAMES = 5
 
 #: A stream rescans every tracked body at every warm solve, not one body per solve in turn: a
@@ -163,7 +163,7 @@ GENERAL_MIN_FRAMES = 5
 #: ``num_bodies`` of them, and the solver's path no longer depends on how the body ids are
 #: numbered. Spinning benchmark, window 10, 30 frames, render seeds 0-11, mean wrong % own2+bg
 #: / own3+bg / own2 / own3, one in turn -> all: 4.5 / 6.0 / 0.19 / 2.1 -> 3.1 / 4.7 / 0.18 /
-#: 1.1; +32% CPU per frame with 4 bodies (session 21, docs/design.md).
+#: 1.1; +32% CPU per frame with 4 bodies.
 GENERAL = Method('general', solve_general,
                  'Ours with a translation per body too (K >= 3, :mod:`.general`).',
                  slow=True, warm_start=WarmStart.MOTIONS, rescans=True,

@@ -30,7 +30,7 @@ rotation-only model (:func:`line_residuals`).
 Fitting the two direction unknowns per line removes all first-order information (the
 translational flow spans the line's whole flow space), which leaves bodies nearly
 indistinguishable over a few frames; :func:`marginal_residuals` instead gives the direction a
-Gaussian prior scaled by the body's translation and integrates it out (docs/design.md).
+Gaussian prior scaled by the body's translation and integrates it out (docs/design/general.md).
 """
 from typing import Optional, Tuple
 
