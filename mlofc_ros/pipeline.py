@@ -28,8 +28,6 @@ Example::
         r.labels, r.angular_velocities      # (M,), (2, 3) rad/s
 """
 from collections import deque
-import dataclasses
-from dataclasses import dataclass, field
 import math
 import statistics
 import time
@@ -38,17 +36,17 @@ from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Set, Tu
 from mlofc_ros import params as _params
 from mlofc_ros.bodies import BodyTracker, relabel
 from mlofc_ros.camera import as_camera, CameraLike, CameraModel
-from mlofc_ros.solver import get_method, Method, segment_lines, SegmentationResult, WarmStart
-from mlofc_ros.solver.robust import WARM_INLIERS
+from mlofc_ros.frame import (check_image_size, check_lines, FrameResult, invalid_bodies, lookup,
+                             Observation, ray_intrinsics, segment_rays, TIMING_KEYS,
+                             unsolved_fields)
+from mlofc_ros.solver import get_method, segment_lines, SegmentationResult
+from mlofc_ros.solver.warm import WarmStarts
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_ros.tracks.undistort import undistort_segments
 from mlofc_ros.tracks.window import TrackWindow
 import numpy as np
 
-#: Keys of :attr:`FrameResult.timings` (milliseconds; ``detect``: the line detector alone, 0
-#: in the frames it does not run, part of ``detect_track``).
-TIMING_KEYS = ('detect_track', 'detect', 'undistort', 'window', 'solve', 'total')
 #: An image whose gray levels span at most this much is blank: no lines, the tracker skips it.
 BLANK_CONTRAST = 2
 #: A body is reported (``body_valid``) only with at least this many tracks in the window: with
@@ -56,322 +54,6 @@ BLANK_CONTRAST = 2
 MIN_BODY_TRACKS = 4
 #: With no calibration, the focal length is fixed to the median of this many window estimates.
 FOCAL_SAMPLES = 8
-
-#: A method that takes ``warm_inliers`` returns the previous window's labels without a search
-#: when they keep 75% of the tracks inliers (:data:`mlofc_ros.solver.robust.WARM_INLIERS`). A
-#: real scene that the rotation model explains only in part stays below that: visp_cube's warm
-#: starts kept 64-74%, every search then found fewer (40-64%), at 4-5 ms instead of 1.5 ms, in
-#: 40% of the frames. After a search, a warm start is accepted when it keeps what the search
-#: kept less WARM_FLOOR_MARGIN, for the next WARM_FLOOR_SOLVES solves (then a search looks
-#: again).
-WARM_FLOOR_MARGIN = 0.05
-WARM_FLOOR_SOLVES = 10
-
-
-@dataclass
-class FrameResult:
-    """
-    What :meth:`Pipeline.process` returns for one frame.
-
-    Attributes
-    ----------
-    stamp : float
-        The frame's stamp, seconds.
-    segments : (M, 4) float32
-        Segments of this frame, ``(x1, y1, x2, y2)`` pixels as detected in the (distorted) image.
-    track_ids : (M,) uint32
-        Track id of every segment.
-    labels : (M,) int32
-        Stable body id of every segment, ``-1`` unassigned (new track, outlier, or no solve).
-        A track the solver leaves unassigned in this window keeps the id it was last assigned
-        for up to ``label_memory`` frames (see :attr:`carried`).
-    residuals : (M,) float32
-        Residual of every segment's track under its body (solver units, pixels-equivalent);
-        NaN when not solved.
-    angular_velocities : (n, 3) float64
-        Angular velocity of every stable body relative to the camera, rad/s, camera optical frame
-        (x right, y down, z forward); rad per frame divided by the window's median frame interval.
-    angular_covariances : (n, 3, 3) float64
-        Their covariances, (rad/s)^2; ``inf`` diagonal when undetermined.
-    body_valid : (n,) bool
-        True when the body's angular velocity and covariance are finite (solved this frame)
-        from at least ``MIN_BODY_TRACKS`` tracks of the window.
-    timings : dict
-        Milliseconds per stage: ``detect_track``, ``undistort``, ``window``, ``solve``, ``total``.
-    window_fill : int
-        Frames in the window (``1..window``).
-    problem : str or None
-        Why this frame gave no (or a degraded) result, for a warning; None when all went well.
-    focal_length : float
-        Focal length (px) the solver used or estimated; NaN when it did not run.
-    frame_interval : float
-        Median frame interval of the window (s); NaN with fewer than two frames.
-    n_tracks : int
-        Tracks handed to the solver.
-    skipped : bool
-        True when the frame was not processed at all (duplicate stamp): nothing to publish.
-    carried : (M,) bool
-        True where the label was carried over from an earlier window, not given by this solve.
-    rays : (M, 3) float32
-        Viewing ray through every segment's midpoint at unit depth ``(x, y, 1)``, camera optical
-        frame, from the undistorted segment and the intrinsics of this frame (the camera's, the
-        ``focal_length`` parameter, or the estimated focal length with the principal point at
-        the image centre); NaN while the focal length is not known.
-
-    """
-
-    stamp: float
-    segments: np.ndarray
-    track_ids: np.ndarray
-    labels: np.ndarray
-    residuals: np.ndarray
-    angular_velocities: np.ndarray
-    angular_covariances: np.ndarray
-    body_valid: np.ndarray
-    timings: Dict[str, float] = field(default_factory=dict)
-    window_fill: int = 0
-    problem: Optional[str] = None
-    focal_length: float = math.nan
-    frame_interval: float = math.nan
-    n_tracks: int = 0
-    skipped: bool = False
-    carried: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
-    rays: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.float32))
-
-    @property
-    def solved(self) -> bool:
-        """Return whether at least one body has a valid angular velocity."""
-        return bool(np.any(self.body_valid))
-
-
-@dataclass
-class Observation:
-    """
-    One frame tracked and added to the window, not yet solved (:meth:`Pipeline.observe`).
-
-    Attributes
-    ----------
-    stamp : float
-        The frame's stamp, seconds.
-    gray : (H, W) uint8 or None
-        The image (for a debug drawing); None for line tracks (:meth:`Pipeline.observe_lines`).
-    segments : (M, 4) float32
-        Segments of this frame, pixels as detected (distorted).
-    track_ids : (M,) uint32
-        Their track ids.
-    win_ids : (N,) int64
-        Ids of the tracks of the window handed to the solver.
-    win_tracks : (N, K, 4) float64
-        Their endpoints over the window (undistorted) px, NaN where a track was not seen.
-    intrinsics : (fx, fy, cx, cy) or None
-        Solver intrinsics, px; None = estimate the focal length.
-    image_size : (width, height)
-        Pixels.
-    window_fill : int
-        Frames in the window (K).
-    frame_interval : float
-        Median frame interval of the window, s (NaN with one frame).
-    blank : bool
-        The image had no contrast (no lines, nothing to solve).
-    problems : list of str
-        What went wrong so far (reported with the result).
-    timings : dict
-        Milliseconds of ``detect_track``, ``undistort``, ``window``.
-    resets : frozenset of str
-        Solve-side state to reset before solving: ``'tracks'`` (the tracker restarted and
-        reuses ids), ``'bodies'`` (body ids restart), ``'focal'`` (forget the focal estimate).
-    elapsed_ms : float
-        Milliseconds :meth:`Pipeline.observe` took.
-    skipped : bool
-        The frame was not processed (duplicate stamp): nothing to solve or publish.
-    undistorted : (M, 4) float64 or None
-        ``segments`` undistorted (None: the same as ``segments``, no distortion).
-
-    """
-
-    stamp: float
-    gray: Optional[np.ndarray]
-    segments: np.ndarray
-    track_ids: np.ndarray
-    win_ids: np.ndarray
-    win_tracks: np.ndarray
-    intrinsics: Optional[Tuple[float, float, float, float]]
-    image_size: Tuple[int, int]
-    window_fill: int
-    frame_interval: float
-    blank: bool
-    problems: List[str]
-    timings: Dict[str, float]
-    resets: FrozenSet[str] = frozenset()
-    elapsed_ms: float = 0.0
-    skipped: bool = False
-    undistorted: Optional[np.ndarray] = None
-
-    @classmethod
-    def skip(cls, stamp: float, gray: Optional[np.ndarray], problem: str, fill: int
-             ) -> 'Observation':
-        """Make the observation of a frame not processed (``problem`` says why), no resets."""
-        return cls(stamp, gray, np.zeros((0, 4), np.float32), np.zeros(0, np.uint32),
-                   np.zeros(0, np.int64), np.zeros((0, 0, 4)), None, (0, 0), fill, math.nan,
-                   False, [problem], {}, skipped=True)
-
-    def replacing(self, older: 'Observation') -> 'Observation':
-        """
-        Return this observation with the resets and problems of ``older`` (dropped unsolved).
-
-        A solve-side reset (a restart of the tracker, a bag loop) must not be lost with the
-        observation that carried it.
-        """
-        problems = list(dict.fromkeys(older.problems + self.problems))
-        return dataclasses.replace(self, resets=self.resets | older.resets, problems=problems)
-
-
-class _WarmStarts:
-    """
-    What the solves of a stream hand to the next one: the solver's warm start.
-
-    Per stable body id the last motion the labels were made with (methods whose warm start
-    is :attr:`WarmStart.MOTIONS`), and the lowered ``warm_inliers`` after a search
-    (:data:`WARM_FLOOR_MARGIN`) with the solves it has left. The previous labels themselves
-    come from the body tracker.
-    """
-
-    def __init__(self) -> None:
-        self.motions: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}
-        self.floor: Optional[Tuple[float, int]] = None
-
-    def reset(self) -> None:
-        """Forget everything (the body ids restart)."""
-        self.motions.clear()
-        self.floor = None
-
-    def keywords(self, method: Method, labels: Optional[np.ndarray], n: int) -> Dict[str, Any]:
-        """
-        Return the keywords of :func:`segment_lines` for a solve by ``method`` of n bodies.
-
-        ``labels``: the previous stable body id of every track of the window (``-1`` none),
-        None when there is no warm start (``num_bodies`` automatic).
-        """
-        if labels is None or method.warm_start is WarmStart.NONE:
-            return {}
-        out: Dict[str, Any] = dict(method.fixed, init_labels=np.where(labels < n, labels, -1))
-        if method.warm_start is WarmStart.MOTIONS and self.motions:
-            w = np.full((n, 3), np.nan)
-            t = np.full((n, 3), np.nan)
-            for body, (w_b, t_b) in self.motions.items():
-                if body < n:
-                    w[body], t[body] = w_b, t_b
-            out['init_motions'] = (w, t)
-            if method.rescans:
-                out['rescan'] = list(range(n))
-        if method.accepts('warm_inliers') and self.floor is not None:
-            floor, left = self.floor
-            out['warm_inliers'] = min(floor, WARM_INLIERS)
-            self.floor = (floor, left - 1) if left > 1 else None
-        return out
-
-    def solved(self, method: Method, res: SegmentationResult) -> None:
-        """Note a solve by ``method``: after a search past the warm start, lower the bar."""
-        if method.accepts('warm_inliers') and res.diagnostics.warm_rejected:
-            share = res.diagnostics.inlier_share or 0.0
-            self.floor = (max(share - WARM_FLOOR_MARGIN, 0.0), WARM_FLOOR_SOLVES)
-
-    def remember(self, res: SegmentationResult, ids: np.ndarray, valid: np.ndarray) -> None:
-        """Keep the motions of the valid bodies of ``res`` under their stable ``ids``."""
-        if res.translation_directions is None:
-            return
-        segmented = np.asarray(res.segmentation_angular_velocities, dtype=float).reshape(-1, 3)
-        for j in np.flatnonzero(valid):                  # bodies, not lines
-            self.motions[int(ids[j])] = (segmented[j],
-                                         np.asarray(res.translation_directions[j]))
-
-
-def segment_rays(segments: np.ndarray,
-                 intrinsics: Optional[Tuple[float, float, float, float]]) -> np.ndarray:
-    """
-    Return the viewing ray ``(x, y, 1)`` through every segment's midpoint, ``(M, 3)`` float32.
-
-    ``segments`` are ``(M, 4)`` undistorted pixels, ``intrinsics`` ``(fx, fy, cx, cy)``; the
-    rays are NaN when ``intrinsics`` is None (the focal length is not known).
-    """
-    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
-    rays = np.full((len(seg), 3), np.nan, dtype=np.float32)
-    if intrinsics is None or not len(seg):
-        return rays
-    fx, fy, cx, cy = intrinsics
-    rays[:, 0] = (0.5 * (seg[:, 0] + seg[:, 2]) - cx) / fx
-    rays[:, 1] = (0.5 * (seg[:, 1] + seg[:, 3]) - cy) / fy
-    rays[:, 2] = 1.0
-    return rays
-
-
-def _invalid_bodies(n: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    cov = np.zeros((n, 3, 3))
-    idx = np.arange(3)
-    cov[:, idx, idx] = math.inf
-    return np.full((n, 3), np.nan), cov, np.zeros(n, dtype=bool)
-
-
-def _lookup(keys: np.ndarray, table_keys: np.ndarray, table_values: np.ndarray,
-            fill: Any) -> np.ndarray:
-    """``table_values`` at the positions of ``keys`` in ``table_keys`` (``fill`` when absent)."""
-    keys = np.asarray(keys).astype(np.int64)
-    table_keys = np.asarray(table_keys).astype(np.int64)
-    out = np.full(keys.shape, fill, dtype=np.asarray(table_values).dtype if table_values.size
-                  else np.float64)
-    if not table_keys.size or not keys.size:
-        return out
-    order = np.argsort(table_keys, kind='stable')
-    sk = table_keys[order]
-    pos = np.clip(np.searchsorted(sk, keys), 0, sk.size - 1)
-    hit = sk[pos] == keys
-    out[hit] = np.asarray(table_values)[order][pos[hit]]
-    return out
-
-
-def check_lines(track_ids: Any, segments: Any) -> Tuple[np.ndarray, np.ndarray]:
-    """
-    Validate one frame of line tracks: ``(ids (M,) uint32, segments (M, 4) float32)``.
-
-    ``track_ids`` integers in ``[0, 2**32)``, unique; ``segments (M, 4)`` px, finite, each
-    longer than 1e-3 px. Raises ``ValueError`` naming the first problem.
-    """
-    ids = np.asarray(track_ids)
-    seg = np.asarray(segments)
-    if ids.ndim != 1:
-        raise ValueError(f'track_ids must be a 1-D array, got shape {ids.shape}')
-    if ids.size and ids.dtype.kind not in 'iu':
-        raise ValueError(f'track_ids must be integers, got dtype {ids.dtype}')
-    if seg.shape != (ids.size, 4) and not (ids.size == 0 and seg.size == 0):
-        raise ValueError(f'segments must be ({ids.size}, 4) for {ids.size} track ids, got '
-                         f'shape {seg.shape}')
-    seg = seg.astype(np.float64).reshape(-1, 4)
-    ids64 = ids.astype(np.int64)
-    if ids.size and (ids64.min() < 0 or ids64.max() >= 2 ** 32):
-        raise ValueError('track_ids must be in [0, 2**32)')
-    if np.unique(ids64).size != ids64.size:
-        raise ValueError('track_ids must be unique within a frame')
-    if not np.all(np.isfinite(seg)):
-        raise ValueError(f'segments must be finite (row {int(np.argmin(np.isfinite(seg).all(1)))} '
-                         'is not)')
-    short = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) <= 1e-3
-    if short.any():
-        raise ValueError(f'segment {int(np.argmax(short))} has zero length: a line needs two '
-                         'distinct endpoints')
-    return ids64.astype(np.uint32), seg.astype(np.float32)
-
-
-def _check_size(image_size: Any) -> Tuple[int, int]:
-    """``(width, height)`` px as two positive integers, else ``ValueError``."""
-    try:
-        w, h = (int(v) for v in image_size)
-        ok = (w, h) == tuple(float(v) for v in image_size)
-    except (TypeError, ValueError):
-        ok = False
-    if not ok or w < 2 or h < 2:
-        raise ValueError(f'image_size must be (width, height) in pixels, each >= 2, got '
-                         f'{image_size!r}')
-    return w, h
 
 
 def make_tracker(params: Mapping[str, Any]) -> LineTracker:
@@ -412,7 +94,7 @@ class Pipeline:
         self._focal_samples: List[float] = []
         self._focal_fixed: Optional[float] = None
         # what a solve hands to the next: the solver's warm start besides the labels
-        self._warm = _WarmStarts()
+        self._warm = WarmStarts()
         # solve-side resets not handed over yet (a tracker failure, a skipped frame's): the
         # next observation carries them
         self._pending_resets: Set[str] = set()
@@ -530,7 +212,7 @@ class Pipeline:
 
     def _empty(self, stamp: float, problem: Optional[str], skipped: bool, fill: int
                ) -> FrameResult:
-        w, c, v = _invalid_bodies(self.n_bodies)
+        w, c, v = invalid_bodies(self.n_bodies)
         return FrameResult(stamp, np.zeros((0, 4), np.float32), np.zeros(0, np.uint32),
                            np.zeros(0, np.int32), np.zeros(0, np.float32), w, c, v,
                            dict.fromkeys(TIMING_KEYS, 0.0), fill, problem, skipped=skipped)
@@ -612,7 +294,7 @@ class Pipeline:
         """
         t0 = time.perf_counter()
         ids, seg = check_lines(track_ids, segments)
-        size = _check_size(image_size)
+        size = check_image_size(image_size)
         self._check_source('lines')
         return self._observe(stamp_seconds, camera, size, t0, lines=(ids, seg))
 
@@ -797,25 +479,15 @@ class Pipeline:
         t = time.perf_counter()
         res = self._segment(obs, problems)
         timings['solve'] = (time.perf_counter() - t) * 1e3
-        out = self._unsolved(obs) if res is None else self._publish(obs, res)
+        out = unsolved_fields(obs, self.n_bodies) if res is None else self._publish(obs, res)
         rays = segment_rays(obs.segments if obs.undistorted is None else obs.undistorted,
-                            self._ray_intrinsics(obs, out.get('focal_length', math.nan)))
+                            ray_intrinsics(obs, out.get('focal_length', math.nan)))
         timings['total'] = obs.elapsed_ms + (time.perf_counter() - t0) * 1e3
         return FrameResult(
             stamp=obs.stamp, segments=obs.segments, track_ids=obs.track_ids,
             timings=timings, window_fill=obs.window_fill, problem='; '.join(problems) or None,
             frame_interval=obs.frame_interval, n_tracks=int(len(obs.win_ids)), rays=rays,
             **out)
-
-    @staticmethod
-    def _ray_intrinsics(obs: Observation, focal: float
-                        ) -> Optional[Tuple[float, float, float, float]]:
-        """Return the frame's intrinsics, else the solver's estimate; None while f is unknown."""
-        if obs.intrinsics is not None:
-            return obs.intrinsics
-        if math.isfinite(focal) and focal > 0:     # as the solver's: the image centre
-            return (focal, focal, obs.image_size[0] / 2.0, obs.image_size[1] / 2.0)
-        return None
 
     def _apply_resets(self, resets: FrozenSet[str]) -> None:
         """Reset the solve side as an observation asks (see :attr:`Observation.resets`)."""
@@ -857,14 +529,6 @@ class Pipeline:
         self._warm.solved(method, res)
         return res
 
-    def _unsolved(self, obs: Observation) -> Dict[str, Any]:
-        """Return the per-segment and per-body fields of a frame that was not solved."""
-        m = len(obs.segments)
-        w, c, v = _invalid_bodies(self.n_bodies)
-        return {'labels': np.full(m, -1, dtype=np.int32),
-                'residuals': np.full(m, np.nan, np.float32), 'angular_velocities': w,
-                'angular_covariances': c, 'body_valid': v, 'carried': np.zeros(m, dtype=bool)}
-
     def _publish(self, obs: Observation, res: SegmentationResult) -> Dict[str, Any]:
         """
         Return the per-segment and per-body fields of a solved frame, by stable body id.
@@ -890,15 +554,15 @@ class Pipeline:
                                  axis=1)
         mapping = self.bodies.update(obs.win_ids, res.labels, omega, valid, positions=mid)
         n_out = max(self.n_bodies, int(mapping.max()) + 1 if mapping.size else 0)
-        w_out, c_out, v_out = _invalid_bodies(n_out)
+        w_out, c_out, v_out = invalid_bodies(n_out)
         w_out[mapping] = published
         c_out[mapping] = cov
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)
         labels, carried = self._segment_labels(obs, res.labels, mapping)
         self._sample_focal(obs, float(res.focal_length))
-        residuals = _lookup(obs.track_ids, obs.win_ids,
-                            np.asarray(res.residuals, dtype=np.float32), np.nan)
+        residuals = lookup(obs.track_ids, obs.win_ids,
+                           np.asarray(res.residuals, dtype=np.float32), np.nan)
         return {'labels': labels, 'residuals': residuals.astype(np.float32),
                 'angular_velocities': w_out, 'angular_covariances': c_out, 'body_valid': v_out,
                 'carried': carried, 'focal_length': float(res.focal_length)}
@@ -912,7 +576,7 @@ class Pipeline:
         up to ``label_memory`` frames.
         """
         stable = relabel(labels, mapping)
-        out = _lookup(obs.track_ids, obs.win_ids, stable.astype(np.int32), -1).astype(np.int32)
+        out = lookup(obs.track_ids, obs.win_ids, stable.astype(np.int32), -1).astype(np.int32)
         carried = np.zeros(len(out), dtype=bool)
         memory = int(self.params['label_memory'])
         if memory > 0:

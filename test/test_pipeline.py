@@ -23,6 +23,7 @@ from mlofc_ros.bodies import assign, BodyTracker, relabel
 from mlofc_ros.pipeline import FOCAL_SAMPLES, FrameResult, Pipeline, TIMING_KEYS
 from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import segment_lines
+from mlofc_ros.solver.warm import WARM_FLOOR_MARGIN, WARM_FLOOR_SOLVES
 from mlofc_ros.tracks.undistort import undistort_segments
 from mlofc_tools.render import render_sequence
 import numpy as np
@@ -687,7 +688,7 @@ def test_after_a_search_the_warm_start_needs_only_what_the_search_kept(monkeypat
     # 75% inliers) and the search kept 0.62; the next WARM_FLOOR_SOLVES solves accept a warm
     # start keeping 0.57, then the default holds again until the next search
     import mlofc_ros.pipeline as pipeline_module
-    solves = pipeline_module.WARM_FLOOR_SOLVES
+    solves = WARM_FLOOR_SOLVES
     seq = small_sequence(solves + 6)
     asked, rejected = [], {3, solves + 5}        # the third solve's search, and the last's
 
@@ -703,7 +704,7 @@ def test_after_a_search_the_warm_start_needs_only_what_the_search_kept(monkeypat
         p.process(img, t, seq.camera)
     assert len(asked) == solves + 5
     assert asked[:3] == [None] * 3 and asked[3 + solves:] == [None] * 2
-    np.testing.assert_allclose(asked[3:3 + solves], 0.62 - pipeline_module.WARM_FLOOR_MARGIN)
+    np.testing.assert_allclose(asked[3:3 + solves], 0.62 - WARM_FLOOR_MARGIN)
     # the last solve lowered the bar again; a reset forgets it with the bodies
     p.reset()
     asked.clear()

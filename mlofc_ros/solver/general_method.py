@@ -69,8 +69,9 @@ PUBLISH_NOISE_SCALE: Optional[float] = 0.01
 #: every body and the rescan's pivot search and comparison use the robust (Cauchy) line cost
 #: at the measured noise, the warm and segmentation fits least squares (the robust cost in
 #: every fit as well measured 4.2 / 9.4 / 6.4 / 8.8 -> 7.8 / 11.9 / 2.7 / 1.5 on an earlier
-#: front end: better without a background body and worse with one). Spinning benchmark, window 10, six seeds, mean wrong % own2+bg / own3+bg /
-#: own2 / own3, least squares -> robust: 4.6 / 16.9 / 2.1 / 9.8 -> 4.0 / 13.3 / 1.6 / 5.3
+#: front end: better without a background body and worse with one). Spinning benchmark,
+#: window 10, six seeds, mean wrong % own2+bg / own3+bg / own2 / own3, least squares ->
+#: robust: 4.6 / 16.9 / 2.1 / 9.8 -> 4.0 / 13.3 / 1.6 / 5.3
 #: (margin 0; 3.1 / 17.4 / 1.7 / 7.8 with 0.1, which kept own3+bg seed 4 in a wrong basin,
 #: 32% wrong, 13% with none: the robust cost makes a wrong basin only ~10% dearer), cam2+bg
 #: 0.09 -> 0.10. The pivot search refines the best start of
