@@ -59,6 +59,7 @@ Run: ``ros2 run mlofc_ros mlofc_node --ros-args -r image:=/cam/image_raw -p num_
 """
 from collections import deque
 import re
+import signal
 import threading
 import time
 from typing import Any, Deque, Dict, List, Optional, Tuple
@@ -512,6 +513,10 @@ def main(args: Optional[List[str]] = None) -> None:
         rclpy.logging.get_logger('mlofc').fatal(f'cannot start: {exc}')
         raise SystemExit(1)
     finally:
+        # a second Ctrl-C (a terminal signals the whole process group, and ros2 launch
+        # forwards its own) must not break the shutdown under way: the workers may need a
+        # moment to finish a solve
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

@@ -340,8 +340,9 @@ def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
          '-r', 'image:=/cam/image_raw', '-r', 'camera_info:=/cam/camera_info',
          '-p', 'num_bodies:=3', '-p', 'focal_length:=300', '-p', 'window:=3'],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    h = Harness()
+    h = None
     try:
+        h = Harness()
         clouds = h.collect(PointCloud2, '/mlofc/segments')
         pub = h.node.create_publisher(Image, '/cam/image_raw', qos_profile_sensor_data)
         # discovery reports the other process's endpoints one by one: wait for all of them
@@ -372,7 +373,8 @@ def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
         assert h.wait(lambda: '/mlofc/body_2/twist' not in h.topics())
         send_frames(h, pub, seq.frames[4:6], seq.stamps[4:6], clouds)
     finally:
-        h.close()
+        if h is not None:
+            h.close()
         proc.send_signal(signal.SIGINT)
         try:
             out, _ = proc.communicate(timeout=15)
@@ -391,3 +393,39 @@ def test_installed_executable_refuses_invalid_parameters_with_the_reason():
     out = proc.stdout + proc.stderr
     assert 'method' in out and 'magic' in out and 'robust' in out, out
     assert 'Traceback' not in out, out
+
+
+@pytest.mark.slow
+def test_a_second_ctrl_c_during_shutdown_leaves_no_traceback(ros):
+    # a terminal's Ctrl-C signals the whole process group and ros2 launch forwards its own
+    # SIGINT: the node gets two, the second while it waits for a busy solver to stop
+    env = dict(os.environ, HOME=os.environ.get('HOME', '/tmp'))
+    proc = subprocess.Popen(
+        [executable('mlofc_node'), '--ros-args', '-r', 'image:=/cam/image_raw',
+         '-p', 'method:=general', '-p', 'window:=5', '-p', 'focal_length:=300.0'],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    h = None
+    try:
+        h = Harness()
+        pub = h.node.create_publisher(Image, '/cam/image_raw', qos_profile_sensor_data)
+        assert h.wait(lambda: pub.get_subscription_count() == 1, 30.0), \
+            'node did not come up: ' + (proc.stdout.read() if proc.poll() is not None else '')
+        seq = small_sequence()
+        for frame, t in zip(seq.frames[:8], seq.stamps[:8]):
+            pub.publish(image_msg(frame, t))
+            time.sleep(0.05)
+        time.sleep(0.5)                     # the solver takes the first full window (seconds)
+    finally:
+        if h is not None:
+            h.close()
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.3)
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        try:
+            out, _ = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, _ = proc.communicate()
+    assert proc.returncode == 0, out
+    assert 'Traceback' not in out and 'KeyboardInterrupt' not in out, out
