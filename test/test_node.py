@@ -333,6 +333,21 @@ def test_in_process_bad_input_queue_drops_and_parameter_changes(ros):
 # --- the installed executable --------------------------------------------------------------
 
 
+def interrupt(proc: subprocess.Popen, again_after: float = None, timeout: float = 30.0) -> str:
+    """Stop ``proc`` with Ctrl-C (a second one ``again_after`` s later); return its output."""
+    proc.send_signal(signal.SIGINT)
+    if again_after is not None:
+        time.sleep(again_after)
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    return out
+
+
 def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
     env = dict(os.environ, HOME=os.environ.get('HOME', '/tmp'), PYTHONUNBUFFERED='1')
     proc = subprocess.Popen(
@@ -375,12 +390,7 @@ def test_installed_executable_remapping_parameters_and_clean_shutdown(ros):
     finally:
         if h is not None:
             h.close()
-        proc.send_signal(signal.SIGINT)
-        try:
-            out, _ = proc.communicate(timeout=15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, _ = proc.communicate()
+        out = interrupt(proc)
     assert proc.returncode == 0, out
     assert 'Traceback' not in out, out
 
@@ -418,14 +428,6 @@ def test_a_second_ctrl_c_during_shutdown_leaves_no_traceback(ros):
     finally:
         if h is not None:
             h.close()
-        proc.send_signal(signal.SIGINT)
-        time.sleep(0.3)
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-        try:
-            out, _ = proc.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, _ = proc.communicate()
+        out = interrupt(proc, again_after=0.3)
     assert proc.returncode == 0, out
     assert 'Traceback' not in out and 'KeyboardInterrupt' not in out, out
