@@ -14,7 +14,7 @@
 """The solver's result types: :class:`SegmentationResult` and its :class:`Diagnostics`."""
 from dataclasses import dataclass, field
 import math
-from typing import Dict, Optional, Tuple
+from typing import Any, Dict, Optional, Tuple
 
 import numpy as np
 
@@ -88,6 +88,19 @@ class Diagnostics:
     score: Optional[float] = None
     translation_scales: Optional[np.ndarray] = None
     note: Optional[str] = None
+
+
+def noted(diagnostics: Diagnostics, **fields: Any) -> Diagnostics:
+    """
+    Set ``fields`` on ``diagnostics`` and return it.
+
+    For a solve's own, fresh diagnostics on the way out: in place, because
+    :func:`dataclasses.replace` copies every field and costs more than the rest of a warm solve's
+    bookkeeping.
+    """
+    for name, value in fields.items():
+        setattr(diagnostics, name, value)
+    return diagnostics
 
 
 @dataclass

@@ -29,7 +29,6 @@ its noise matches that of the tracks fitted one by one, nearly every track fits 
 well as alone, and the bodies are told apart (:data:`EARLY_RATIO`); the other starts (MSAC
 costs more than everything else together) are then skipped.
 """
-from dataclasses import replace
 from typing import NamedTuple, Optional, Tuple
 
 import numpy as np
@@ -39,7 +38,7 @@ from .ksubspaces import assign, ksubspaces, total_cost
 from .lines import first_midpoints, LineFlows
 from .models import (chi2_quantile, fit_bodies, median, normal_ridge, quad_costs,
                      solve_normal_equations, track_costs, track_stats, TrackStats)
-from .result import Diagnostics
+from .result import Diagnostics, noted
 from .spatial import smooth_labels, spatial_neighbours
 
 #: A warm start is accepted alone when it leaves at least this share of the tracks as inliers
@@ -187,7 +186,7 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
             counts = np.bincount(lab[lab >= 0], minlength=n)
             share = float(np.mean(lab[stats.usable] >= 0)) if stats.usable.any() else 0.0
             if np.all(counts >= 2) and share >= warm_inliers:
-                return out._replace(diagnostics=replace(out.diagnostics, inlier_share=share))
+                return out._replace(diagnostics=noted(out.diagnostics, inlier_share=share))
             if np.all(counts >= 2):
                 warm = out
         # still a candidate, refined like the others
@@ -243,7 +242,7 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
             name, lab, c, costs = 'previous-pass', warm.labels, warm.cayley, warm.costs
     out = _final_pass(flows, tracks, lab, c, dof, sigma, name, dict(zip(names, scores)), costs)
     share = float(np.mean(out.labels[stats.usable] >= 0)) if stats.usable.any() else 0.0
-    return out._replace(diagnostics=replace(out.diagnostics, inlier_share=share,
+    return out._replace(diagnostics=noted(out.diagnostics, inlier_share=share,
                                             warm_rejected=tried))
 
 
@@ -340,7 +339,7 @@ def _early_accept(flows: LineFlows, tracks: np.ndarray, stats: TrackStats, first
         return None
     out = _final_pass(flows, tracks, lab, c, dof, sigma, name, {}, exact)
     if np.all(np.bincount(out.labels[out.labels >= 0], minlength=c.shape[0]) >= 2):
-        return out._replace(diagnostics=replace(out.diagnostics, early_accept=True))
+        return out._replace(diagnostics=noted(out.diagnostics, early_accept=True))
     return None
 
 

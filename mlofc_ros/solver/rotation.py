@@ -20,7 +20,6 @@ The rotation-only methods, at a known or an unknown focal length.
 :class:`~.problem.Problem`, estimating the focal length first when the intrinsics are unknown,
 and makes the :class:`~.result.SegmentationResult` (covariances, residuals).
 """
-from dataclasses import replace
 import math
 from typing import Callable, Optional, Tuple
 
@@ -32,7 +31,7 @@ from .ksubspaces import assign, ksubspaces, total_cost
 from .lines import cayley_jacobian, cayley_to_rotvec, line_flows, LineFlows
 from .models import fit_bodies, fit_stats, quad_costs, track_costs, track_stats
 from .problem import Problem
-from .result import Diagnostics, SegmentationResult
+from .result import Diagnostics, noted, SegmentationResult
 from .robust import noise_sigma, robust_segmentation, Segmentation, WARM_INLIERS
 
 #: A known-f segmentation: ``(flows, tracks (N, K, 4), n, rng) -> Segmentation``.
@@ -123,7 +122,7 @@ def solve_rotation(problem: Problem, method: str, segment: KnownFocal,
         flows = line_flows(problem.tracks, problem.intrinsics)
         seg = segment(flows, problem.tracks, problem.n_bodies, rng)
         return finish(flows, seg, fx, method,
-                      replace(seg.diagnostics, principal_point=(cx, cy), aspect=fy / fx,
+                      noted(seg.diagnostics, principal_point=(cx, cy), aspect=fy / fx,
                               image_size=problem.image_size))
     f, first_order = estimate_focal(problem, rng, refine_with or robust_segmenter())
     w, h = problem.image_size
@@ -131,7 +130,7 @@ def solve_rotation(problem: Problem, method: str, segment: KnownFocal,
     flows = line_flows(problem.tracks, (f, f) + centre)
     seg = segment(flows, problem.tracks, problem.n_bodies, rng)
     return finish(flows, seg, f, method,
-                  replace(seg.diagnostics, focal_first_order=first_order,
+                  noted(seg.diagnostics, focal_first_order=first_order,
                           principal_point=centre, aspect=1.0, image_size=problem.image_size))
 
 
@@ -208,7 +207,7 @@ def finish(flows: LineFlows, seg: Segmentation, focal: float, method: str,
                               angular_velocities=cayley_to_rotvec(c), angular_covariances=cov,
                               focal_length=float(focal), residuals=rms, costs=costs,
                               method=method,
-                              diagnostics=replace(diagnostics, sigma_px=float(sigma)))
+                              diagnostics=noted(diagnostics, sigma_px=float(sigma)))
 
 
 def _covariances(information: np.ndarray, jac: np.ndarray, sigma2: float, fitted: np.ndarray
