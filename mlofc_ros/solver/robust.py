@@ -243,7 +243,7 @@ def robust_segmentation(flows: LineFlows, tracks: np.ndarray, n: int,
     out = _final_pass(flows, tracks, lab, c, dof, sigma, name, dict(zip(names, scores)), costs)
     share = float(np.mean(out.labels[stats.usable] >= 0)) if stats.usable.any() else 0.0
     return out._replace(diagnostics=noted(out.diagnostics, inlier_share=share,
-                                            warm_rejected=tried))
+                                          warm_rejected=tried))
 
 
 def free_residuals(stats: TrackStats, dof: np.ndarray) -> np.ndarray:

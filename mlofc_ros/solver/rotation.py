@@ -123,7 +123,7 @@ def solve_rotation(problem: Problem, method: str, segment: KnownFocal,
         seg = segment(flows, problem.tracks, problem.n_bodies, rng)
         return finish(flows, seg, fx, method,
                       noted(seg.diagnostics, principal_point=(cx, cy), aspect=fy / fx,
-                              image_size=problem.image_size))
+                            image_size=problem.image_size))
     f, first_order = estimate_focal(problem, rng, refine_with or robust_segmenter())
     w, h = problem.image_size
     centre = (w / 2.0, h / 2.0)
@@ -131,7 +131,7 @@ def solve_rotation(problem: Problem, method: str, segment: KnownFocal,
     seg = segment(flows, problem.tracks, problem.n_bodies, rng)
     return finish(flows, seg, f, method,
                   noted(seg.diagnostics, focal_first_order=first_order,
-                          principal_point=centre, aspect=1.0, image_size=problem.image_size))
+                        principal_point=centre, aspect=1.0, image_size=problem.image_size))
 
 
 def estimate_focal(problem: Problem, rng: np.random.Generator, refine_with: KnownFocal
