@@ -29,8 +29,6 @@ import sys
 import time
 from typing import Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
-# re-exported: benchmarks score through common
-from mlofc_tools.scoring import best_permutation, misclassification, motion_errors  # noqa: F401
 import numpy as np
 
 #: ``docs/results`` of the source checkout this module lives in.

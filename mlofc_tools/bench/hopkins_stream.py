@@ -45,6 +45,7 @@ from mlofc_tools.bench import common
 from mlofc_tools.bench.hopkins_runs import (LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX,
                                             n_motions_of, pick_sequences)
 from mlofc_tools.datasets import hopkins as hk
+from mlofc_tools.scoring import misclassification
 import numpy as np
 
 #: Frames per window (`bench hopkins`'s K = 5).
@@ -86,7 +87,7 @@ def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
         if t >= K:                                       # warm solves of full windows
             cpu.append(time.process_time() - c)
         if t >= K - 1:
-            stream.append(common.misclassification(res.labels, truth, n))
+            stream.append(misclassification(res.labels, truth, n))
     rec = {'name': seq.name, 'group': seq.group, 'n': n, 'frames': frames,
            'lines': int(len(truth)), 'stream': stream,
            'cpu_warm': float(np.median(cpu)) if cpu else float('nan')}
@@ -94,7 +95,7 @@ def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
     for key, start in (('cold_mid', last // 2), ('cold_last', last)) if cold else ():
         res = segment_lines(tracks[:, start:start + K], n, intrinsics=None,
                             image_size=seq.image_size, method='general', seed=s)
-        rec[key] = common.misclassification(res.labels, truth, n)
+        rec[key] = misclassification(res.labels, truth, n)
     return rec
 
 
