@@ -277,13 +277,19 @@ def check_image_size(image_size: Any) -> Tuple[int, int]:
     return w, h
 
 
+def centred_intrinsics(focal: float, image_size: Tuple[int, int]
+                       ) -> Tuple[float, float, float, float]:
+    """Return ``(f, f, w / 2, h / 2)``: square pixels, principal point at the image centre."""
+    return (focal, focal, image_size[0] / 2.0, image_size[1] / 2.0)
+
+
 def ray_intrinsics(obs: Observation, focal: float
                    ) -> Optional[Tuple[float, float, float, float]]:
     """Return the frame's intrinsics, else the solver's estimate; None while f is unknown."""
     if obs.intrinsics is not None:
         return obs.intrinsics
     if math.isfinite(focal) and focal > 0:     # as the solver's: the image centre
-        return (focal, focal, obs.image_size[0] / 2.0, obs.image_size[1] / 2.0)
+        return centred_intrinsics(focal, obs.image_size)
     return None
 
 

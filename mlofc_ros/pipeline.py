@@ -36,9 +36,9 @@ from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Set, Tu
 from mlofc_ros import params as _params
 from mlofc_ros.bodies import BodyTracker, relabel
 from mlofc_ros.camera import as_camera, CameraLike, CameraModel
-from mlofc_ros.frame import (check_image_size, check_lines, FrameResult, invalid_bodies, lookup,
-                             Observation, ray_intrinsics, segment_rays, TIMING_KEYS,
-                             unsolved_fields)
+from mlofc_ros.frame import (centred_intrinsics, check_image_size, check_lines, FrameResult,
+                             invalid_bodies, lookup, Observation, ray_intrinsics, segment_rays,
+                             TIMING_KEYS, unsolved_fields)
 from mlofc_ros.solver import get_method, segment_lines, SegmentationResult
 from mlofc_ros.solver.warm import WarmStarts
 from mlofc_ros.tracks.config import TrackerConfig
@@ -202,12 +202,12 @@ class Pipeline:
         """Solver intrinsics (None = estimate f) and the camera to undistort with (or None)."""
         f = float(self.params['focal_length'])
         if f > 0:
-            return (f, f, size[0] / 2.0, size[1] / 2.0), None
+            return centred_intrinsics(f, size), None
         if camera is None:
             if self._focal_fixed is None:
                 return None, None
             f = self._focal_fixed
-            return (f, f, size[0] / 2.0, size[1] / 2.0), None
+            return centred_intrinsics(f, size), None
         return camera.intrinsics, (camera if camera.has_distortion else None)
 
     def _empty(self, stamp: float, problem: Optional[str], skipped: bool, fill: int
