@@ -54,10 +54,12 @@ def test_score_run_counts_wrong_unassigned_and_omega_errors():
     row = spinning.build_rows([{'scene': 'x', 'seed': 0, 'method': 'robust', 'window': 5,
                                 'score': s}])[0]
     assert row[4] == 12.5 and row[5] == 12.5 and row[7] == '10' and row[10] == 20.0
-    rec = {'scene': 'x', 'seed': 0, 'method': 'robust', 'window': 5, 'score': s}
+    rec = {'scene': 'x', 'seed': 0, 'method': 'robust', 'window': 5,
+           'score': dict(s, lsd_ms=8.0)}
     summary = spinning.summary_rows([rec, dict(rec, seed=1)])
     assert len(summary) == 1 and summary[0][3] == 2 and summary[0][4] == 12.5
     assert summary[0][6] == 12.5
+    assert summary[0][-2] == 20.0 and summary[0][-1] == 2.5    # mean ms and mean / LSD
 
 
 def test_score_run_per_frame_leaves_out_id_switches():

@@ -451,3 +451,66 @@ def test_marginal_costs_and_residual_vectors_match_the_direct_formula():
     vecs = marginal_residuals(obs, idx, w_a * 1.1, t, sigma2, n0, fixed=n2)[0]
     assert vecs.shape == (12, 2 * a.shape[1] + 1)
     assert np.allclose(np.sum(vecs ** 2, axis=1), cost2, rtol=1e-9)
+
+
+def _two_spinning_bodies():
+    """Return tracks over 11 frames, true labels, and the full solve's motions on frames 0-9."""
+    a, w_a, t_a = spinning_lines(n_lines=20, seed=3, n_frames=11)
+    b, w_b, t_b = spinning_lines(n_lines=20, seed=4, centre=(-0.4, 0.3, 7.0), deg=-3.0,
+                                 n_frames=11)
+    tracks, truth = np.concatenate([a, b]), np.repeat([0, 1], 20)
+    full = segment_lines(tracks[:, :10], 2, intrinsics=(F, F, C, C), method='general',
+                         init_labels=truth, init_motions=(np.array([w_a, w_b]) * 1.02,
+                                                          np.array([t_a, t_b])),
+                         rescan=[0, 1])
+    scales = full.diagnostics.translation_scales[:, None]
+    return (tracks, truth, np.array([w_a, w_b]),
+            (full.segmentation_angular_velocities, full.translation_directions * scales))
+
+
+def test_a_tracking_step_advances_the_bodies_without_a_search(monkeypatch):
+    # the pipeline's step: the previous window's motions, one frame on
+    from mlofc_ros.solver import general_method
+    tracks, truth, W, motions = _two_spinning_bodies()
+    init = truth.copy()
+    init[::7] = -1                                       # new tracks have no label yet
+    searched = []
+    monkeypatch.setattr(general_method, 'fit_body_multistart',
+                        lambda *a, **k: searched.append(1))
+    res = segment_lines(tracks[:, 1:], 2, intrinsics=(F, F, C, C), method='general',
+                        init_labels=init, init_motions=motions, step=True)
+    assert res.diagnostics.start == 'step' and not searched
+    assert np.count_nonzero(res.labels != truth) <= 1   # one line fits both bodies
+    for b in range(2):
+        err = np.linalg.norm(res.angular_velocities[b] - W[b]) / np.linalg.norm(W[b])
+        assert err < 0.01
+        assert np.array_equal(res.angular_velocities[b],
+                              res.segmentation_angular_velocities[b])
+        assert np.all(np.isfinite(res.angular_covariances[b]))
+
+
+def test_a_tracking_step_falls_back_to_the_tracked_solve_where_it_cannot_step():
+    tracks, truth, W, (w0, t0) = _two_spinning_bodies()
+    intr = (F, F, C, C)
+    unknown = w0.copy()
+    unknown[1] = np.nan                                  # a body without a motion
+    res = segment_lines(tracks[:, 1:], 2, intrinsics=intr, method='general',
+                        init_labels=truth, init_motions=(unknown, t0), step=True)
+    assert res.diagnostics.start == 'warm'
+    with pytest.raises(ValueError, match='step needs init_motions'):
+        segment_lines(tracks, 2, intrinsics=intr, method='general', init_labels=truth,
+                      step=True)
+    with pytest.raises(ValueError, match='does not take step'):
+        segment_lines(tracks, 2, intrinsics=intr, method='robust', init_labels=truth,
+                      step=True)
+
+
+def test_rescale_translation_finds_the_scale_of_a_translation_at_the_segmentation_noise():
+    from mlofc_ros.solver.general import rescale_translation
+    tracks, truth, _, (W, T) = _two_spinning_bodies()
+    obs = LineObservations(tracks[:, :10], (F, F, C, C))
+    idx = np.flatnonzero(truth == 0)
+    for wrong in (8.0, 1 / 8.0):
+        t = rescale_translation(obs, idx, W[0], T[0] * wrong, 1.0)
+        assert np.allclose(t / np.linalg.norm(t), T[0] / np.linalg.norm(T[0]))
+        assert 0.5 < np.linalg.norm(t) / np.linalg.norm(T[0]) < 2.0

@@ -87,3 +87,43 @@ def test_warm_inliers_sets_the_share_a_warm_start_keeps_without_a_search():
         with pytest.raises(ValueError, match='warm_inliers'):
             segment_lines(sc.tracks[:, 1:], 2, intrinsics=sc.intrinsics, init_labels=init,
                           warm_inliers=bad)
+
+
+def test_a_stream_of_general_solves_steps_between_full_solves():
+    # the pipeline's schedule: full solves (every body rescanned) after a search, then steps,
+    # one body rescanned in turn every RESCAN_EVERY steps, a full solve after a noise jump
+    from mlofc_ros.solver.methods import GENERAL
+    from mlofc_ros.solver.result import Diagnostics, SegmentationResult
+    from mlofc_ros.solver.warm import FULL_AFTER_SEARCH, NOISE_JUMP, RESCAN_EVERY, WarmStarts
+    warm, labels, n = WarmStarts(), np.zeros(6, dtype=np.int64), 2
+
+    def solve(start, sigma=0.5):
+        kw = warm.keywords(GENERAL, labels, n)
+        res = SegmentationResult(
+            labels=labels, angular_velocities=np.full((n, 3), 0.01),
+            angular_covariances=np.stack([np.eye(3)] * n), focal_length=500.0,
+            residuals=np.zeros(6), costs=np.zeros((6, n)), method='general',
+            segmentation_angular_velocities=np.full((n, 3), 0.01),
+            translation_directions=np.tile([0.0, 0.0, 1.0], (n, 1)),
+            diagnostics=Diagnostics(start=start, sigma_px=sigma,
+                                    translation_scales=np.full(n, 0.02)))
+        warm.solved(GENERAL, res)
+        warm.remember(res, np.arange(n), np.ones(n, dtype=bool))
+        return kw
+
+    assert 'init_motions' not in solve('spatial')          # the first window: a search
+    for _ in range(FULL_AFTER_SEARCH):
+        kw = solve('warm')
+        assert kw['rescan'] == [0, 1] and 'step' not in kw
+    # the translation is handed on with its scale
+    assert np.allclose(kw['init_motions'][1], [[0.0, 0.0, 0.02]] * n)
+    rescanned = []
+    for _ in range(4 * RESCAN_EVERY):
+        kw = solve('step')
+        assert kw['step']
+        rescanned += kw.get('rescan', [])
+    assert rescanned == [0, 1, 0, 1]                     # one body in turn
+    assert solve('step', sigma=0.5 * NOISE_JUMP * 1.1)['step']
+    kw = solve('warm')                                   # after the jump: a full solve
+    assert 'step' not in kw and kw['rescan'] == [0, 1]
+    assert solve('step')['step']

@@ -89,7 +89,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
                   image_size: Optional[Sequence[float]] = None, method: str = 'robust', *,
                   seed: int = 0, init_labels: Optional[np.ndarray] = None,
                   init_motions: Optional[Tuple[np.ndarray, np.ndarray]] = None,
-                  rescan: Optional[Sequence[int]] = None,
+                  rescan: Optional[Sequence[int]] = None, step: Optional[bool] = None,
                   warm_inliers: Optional[float] = None,
                   warm_competes: Optional[bool] = None) -> SegmentationResult:
     """
@@ -125,11 +125,12 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         this model does not have count as unknown), an extra starting point.
     init_motions : ((n, 3), (n, 3)) float, optional
         'general', with ``init_labels``: the previous window's rotation vectors (rad per
-        frame) and unit translation directions per body
+        frame) and translations per body
         (:attr:`.SegmentationResult.segmentation_angular_velocities` and
-        :attr:`.SegmentationResult.translation_directions`), NaN rows unknown. The bodies are
-        then tracked from them instead of the multi-start search (which still runs when too
-        few tracks stay inliers).
+        :attr:`.SegmentationResult.translation_directions` times
+        :attr:`.Diagnostics.translation_scales`; a unit direction is accepted, the scale is
+        then refit), NaN rows unknown. The bodies are then tracked from them instead of the
+        multi-start search (which still runs when too few tracks stay inliers).
     rescan : sequence of int, optional
         'general', with ``init_motions``: bodies (ids in ``[0, n)``) whose tracked motion is
         also refitted from the pivot starts of the multi-start search
@@ -138,6 +139,12 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         (:data:`.general_method.RESCAN_MARGIN`). A body tracked in a wrong basin (a wrong
         pivot, the depth-reversed motion) otherwise keeps it window after window. The labels
         follow in the next window.
+    step : bool, optional
+        'general', with ``init_motions``: when true and every body has a motion, a tracking
+        step instead of a solve: a few LM steps of every body from its motion, the tracks
+        assigned once, no search and no rescan (:func:`.general_method.solve_general`); the
+        tracked solve runs when too few tracks stay inliers. A stream asks for a full solve
+        at a low rate (:data:`.warm.FULL_SOLVE_EVERY`).
     warm_inliers : float, optional
         'robust', with ``init_labels``: the share of the usable tracks that the previous
         labels' final pass must keep as inliers to be returned without a search (default
@@ -176,7 +183,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     intr, size = _check_intrinsics(intrinsics, image_size)
     given = {key: value for key, value in (('init_labels', init_labels),
                                            ('init_motions', init_motions),
-                                           ('rescan', rescan), ('warm_inliers', warm_inliers),
+                                           ('rescan', rescan), ('step', step),
+                                           ('warm_inliers', warm_inliers),
                                            ('warm_competes', warm_competes))
              if value is not None}
     keywords = _check_keywords(spec, n, arr.shape[0], given)
@@ -235,6 +243,10 @@ def _check_keywords(spec: Method, n: int, n_tracks: int, given: Dict[str, Any]
         if 'init_motions' not in given:
             raise ValueError('rescan needs init_motions (it refits tracked bodies)')
         out['rescan'] = _check_rescan(given['rescan'], n)
+    if 'step' in given:
+        if 'init_motions' not in given:
+            raise ValueError('step needs init_motions (it advances tracked bodies)')
+        out['step'] = bool(given['step'])
     return out
 
 

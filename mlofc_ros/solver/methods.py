@@ -167,7 +167,7 @@ GENERAL_MIN_FRAMES = 5
 GENERAL = Method('general', solve_general,
                  'Ours with a translation per body too (K >= 3, :mod:`.general`).',
                  slow=True, warm_start=WarmStart.MOTIONS, rescans=True,
-                 keywords=frozenset({'init_labels', 'init_motions', 'rescan'}),
+                 keywords=frozenset({'init_labels', 'init_motions', 'rescan', 'step'}),
                  min_frames=GENERAL_MIN_FRAMES, stand_in=ROTATION_STEP)
 
 #: Every method by name, in the order of :data:`METHODS`.

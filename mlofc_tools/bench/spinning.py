@@ -33,10 +33,13 @@ node runs (minus DDS). Scored on the frames with a full window, like
 - ``LOS err %``: the same against the truth's component along the box's line of sight
   ``(w_true . p) p`` (``p`` the unit ray to the box centre): what a rotation-only fit of a
   small spinning body can see;
-- ``ms/frame``: CPU time of ``Pipeline.process`` per frame: median and p95 over the scored
-  frames, max over all frames ('general' runs its full multi-start search on the first window
-  of :data:`~mlofc_ros.solver.methods.GENERAL_MIN_FRAMES` frames and whenever tracking the
-  previous motions leaves too few inliers).
+- ``ms/frame``: CPU time of ``Pipeline.process`` per frame: median, mean and p95 over the
+  scored frames, max over all frames ('general' runs its full multi-start search on the first
+  window of :data:`~mlofc_ros.solver.methods.GENERAL_MIN_FRAMES` frames and whenever tracking
+  the previous motions leaves too few inliers; between its full solves it steps,
+  :data:`~mlofc_ros.solver.warm.FULL_SOLVE_EVERY`); ``mean x LSD``: the mean over the scored
+  frames over the median CPU time of OpenCV's default LSD alone on the same frames, measured
+  in the same run (the goal of issue #39: at most 1.0).
 
 Every scene is rendered with several seeds (0, 1, 2 by default): one run is a single draw
 from a chaotic process (a body fitted in a wrong basin in one frame keeps it through the warm
@@ -213,13 +216,28 @@ def summary_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
                      _pct(float(np.mean([s['unassigned'] for s in scores]))),
                      f'{100 * np.median(err):.0f}' if err.size else '—',
                      f'{np.mean(err <= 0.05):.2f}' if err.size else '—',
-                     float(np.median(np.concatenate([s['ms'] for s in scores])))])
+                     float(np.median(np.concatenate([s['ms'] for s in scores]))),
+                     float(np.mean(np.concatenate([s['ms'] for s in scores]))),
+                     float(np.mean([np.mean(s['ms']) / s['lsd_ms'] for s in scores]))])
     return rows
+
+
+def lsd_ms(seq) -> float:
+    """Return the median CPU ms of OpenCV's default LSD alone on the frames of ``seq``."""
+    import cv2
+    lsd = cv2.createLineSegmentDetector()
+    ms = []
+    for gray in seq.frames:
+        c = time.thread_time()
+        lsd.detect(gray)
+        ms.append((time.thread_time() - c) * 1e3)
+    return float(np.median(ms))
 
 
 SUMMARY_HEADERS = ['scene', 'method', 'window', 'seeds', 'wrong % (mean)', 'wrong % (worst)',
                    'per frame (mean)', '-1 % (mean)', 'omega err % (median over boxes)',
-                   'boxes with omega err <= 5%', 'ms/frame median']
+                   'boxes with omega err <= 5%', 'ms/frame median', 'ms/frame mean',
+                   'mean x LSD']
 
 HEADERS = ['scene', 'seed', 'method', 'window', 'wrong %', 'per frame', '-1 %',
            'omega err % (boxes)', 'LOS err % (boxes)', 'static |w| deg/s', 'ms/frame median',
@@ -297,10 +315,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         for seed in seeds:
             seq = render_sequence(n_boxes=boxes, n_frames=args.frames, size=(640, 480),
                                   motion=motion, background=background, seed=seed)
+            reference = lsd_ms(seq)
             for method in methods:
                 for window in windows:
                     outs = run_pipeline(seq, method, window, args.params)
                     score = score_run(seq, outs, min(window - 1, args.frames - 1))
+                    score['lsd_ms'] = reference
                     records.append({'scene': scene, 'seed': seed, 'method': method,
                                     'window': window, 'score': score})
                     row = build_rows(records[-1:])[0]

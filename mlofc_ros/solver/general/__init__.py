@@ -26,21 +26,24 @@ only). The package's modules, in the order they build on each other:
 - :mod:`.covariance`: the published rotation's covariance.
 """
 from .covariance import body_covariance
-from .fit import fit_body, ROBUST_SCALE, robust_scale
+from .fit import fit_body, rescale_translation, RESCALES, ROBUST_SCALE, robust_scale
 from .model import (general_costs, Intrinsics, line_residuals, LineObservations,
                     marginal_costs, marginal_residuals)
 # the oracles of bench hopkins run the search's own steps
 from .search import _best_costs, _fit_each_body, _robust_sigma2  # noqa: F401
-from .search import (general_search, general_warm, marginal_segmentation, NOISE_FACTOR,
-                     position_costs, POSITION_PRIOR, POSITION_WEIGHT, SIGMA_FLOOR_PX,
-                     spatial_labels, WARM_INLIERS)
+from .search import (assign_bodies, assign_fitted, general_search, general_warm,
+                     marginal_segmentation, measured_noise, NOISE_FACTOR, position_costs,
+                     POSITION_PRIOR, POSITION_WEIGHT, SIGMA_FLOOR_PX, spatial_labels,
+                     WARM_INLIERS)
 from .starts import (fit_body_multistart, necker_mirror, PIVOT_KEEP, pivot_picks, PIVOT_RATES,
                      pivot_starts, PIVOT_W, polish_body, T_SCALES, T_STARTS)
 
-__all__ = ['body_covariance', 'fit_body', 'fit_body_multistart', 'general_costs',
-           'general_search', 'general_warm', 'Intrinsics', 'line_residuals', 'LineObservations',
-           'marginal_costs', 'marginal_residuals', 'marginal_segmentation', 'necker_mirror',
+__all__ = ['assign_bodies', 'assign_fitted', 'body_covariance', 'fit_body',
+           'fit_body_multistart', 'general_costs', 'general_search', 'general_warm',
+           'Intrinsics', 'line_residuals', 'LineObservations', 'marginal_costs',
+           'marginal_residuals', 'marginal_segmentation', 'measured_noise', 'necker_mirror',
            'NOISE_FACTOR', 'PIVOT_KEEP', 'pivot_picks', 'PIVOT_RATES', 'pivot_starts', 'PIVOT_W',
-           'polish_body', 'position_costs', 'POSITION_PRIOR', 'POSITION_WEIGHT', 'ROBUST_SCALE',
+           'polish_body', 'position_costs', 'POSITION_PRIOR', 'POSITION_WEIGHT', 'RESCALES',
+           'rescale_translation', 'ROBUST_SCALE',
            'robust_scale', 'SIGMA_FLOOR_PX', 'spatial_labels', 'T_SCALES', 'T_STARTS',
            'WARM_INLIERS']

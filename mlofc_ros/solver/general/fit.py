@@ -109,6 +109,26 @@ def _scan_costs(rows: np.ndarray, base: np.ndarray, w: np.ndarray, T: np.ndarray
     return out
 
 
+#: Scales of a translation tried by :func:`rescale_translation`: T = 0 and x 1/16 to x 16 in
+#: steps of sqrt(2).
+RESCALES = np.concatenate([[0.0], 2.0 ** np.arange(-4.0, 4.5, 0.5)])
+
+
+def rescale_translation(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
+                        sigma2: float) -> np.ndarray:
+    """
+    Return ``t (3,)`` at the scale of :data:`RESCALES` that fits the tracks ``idx`` best.
+
+    ``w``: the rotation (rad/frame), held; ``sigma2`` (px^2): the noise variance of the
+    marginalised cost, whose translation scale means something only at that level (a fit at
+    a small noise leaves it nearly free). One batched cost evaluation.
+    """
+    cands = np.asarray(t, dtype=float) * RESCALES[:, None]
+    costs = _scan_costs(obs.rows[idx], obs.m_first[idx], np.asarray(w, dtype=float), cands,
+                        sigma2)
+    return cands[int(np.argmin(costs))]
+
+
 #: Step of the Jacobian's central differences, per parameter (rad per frame; T's units).
 _STEP = 1e-6
 

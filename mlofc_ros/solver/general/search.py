@@ -67,6 +67,30 @@ def _robust_sigma2(best: np.ndarray, dof: np.ndarray) -> float:
     return float(max(np.median(best[ok] / chi2_quantile(0.5, dof[ok])), SIGMA_FLOOR_PX ** 2))
 
 
+def measured_noise(obs: LineObservations, W: np.ndarray, T: np.ndarray) -> float:
+    """
+    Return the endpoint noise variance (px^2) of the tracks at the motions ``(W, T) (n, 3)``.
+
+    The median over the tracks of each one's cheapest fitted-direction cost
+    (:func:`.general_costs`), normalised by its chi-square median (2K - 4 dof).
+    """
+    dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
+    return _robust_sigma2(_best_costs(general_costs(obs, W, T)), dof)
+
+
+def assign_fitted(obs: LineObservations, W: np.ndarray, T: np.ndarray,
+                  outlier_p: float = 0.9999) -> Tuple[np.ndarray, float]:
+    """
+    Assign every track at the motions ``(W, T) (n, 3)`` by its fitted-direction costs.
+
+    Returns the labels ``(N,)`` (``-1`` above the chi-square bound at ``outlier_p``) and the
+    measured noise variance (px^2, :func:`measured_noise`).
+    """
+    dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
+    sigma2, _, labels = _assign_within_bound(general_costs(obs, W, T), dof, outlier_p)
+    return labels, sigma2
+
+
 def _assign_within_bound(costs: np.ndarray, dof: np.ndarray, outlier_p: float
                          ) -> Tuple[float, np.ndarray, np.ndarray]:
     """Return noise level, chi-square outlier bound ``(N,)`` and labels (``-1``: above it)."""
@@ -167,6 +191,32 @@ def position_costs(points: np.ndarray, labels: np.ndarray, n: int,
     return out
 
 
+def assign_bodies(obs: LineObservations, W: np.ndarray, T: np.ndarray, sigma2: float,
+                  labels: np.ndarray, outlier_p: float = 0.9999,
+                  neighbours: Optional[np.ndarray] = None, points: Optional[np.ndarray] = None,
+                  position_weight: float = POSITION_WEIGHT
+                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Assign every track to a body at the motions ``(W, T) (n, 3)`` (marginalised directions).
+
+    ``sigma2``: the noise variance (px^2) of the costs; ``labels (N,)``: the labels the
+    bodies were fitted to (their image blobs, :func:`position_costs`, when ``points`` is
+    given); ``outlier_p``, ``neighbours``: as in :func:`marginal_segmentation`. Returns the
+    new labels ``(N,)`` (``-1`` outliers), the motion costs ``(N, n)``, the costs with the
+    position terms ``(N, n)`` and the outlier caps ``(N,)``.
+    """
+    dof = np.maximum(2.0 * obs.frames - 2.0, 0.0)
+    costs, logdet = marginal_costs(obs, W, T, sigma2)
+    total = costs
+    if points is not None:
+        # the blobs of the labels the bodies were just fitted to; the position term is no
+        # evidence of an outlier, so it joins the log-determinant in the cap
+        extra = position_weight * sigma2 * position_costs(points, labels, W.shape[0])
+        total, logdet = costs + extra, logdet + extra
+    new, cap = _assign_marginal(total, logdet, dof, sigma2, outlier_p, neighbours)
+    return new, costs, total, cap
+
+
 def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.ndarray,
                           T0: np.ndarray, sigma2: float, rounds: int = 8, iterations: int = 5,
                           outlier_p: float = 0.9999, neighbours: Optional[np.ndarray] = None,
@@ -214,7 +264,6 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
     position terms included).
 
     """
-    dof = np.maximum(2.0 * obs.frames - 2.0, 0.0)
     usable = obs.frames >= 3
     best = None
     for name, lab in starts:
@@ -227,14 +276,8 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         for _ in range(rounds):
             _fit_each_body(obs, lab, W, T, fitted, iterations, lambda b: W[b], sigma2,
                            lambda b: T[b], keep, first_iterations, pivots)
-            costs, logdet = marginal_costs(obs, W, T, sigma2)
-            total = costs
-            if points is not None:
-                # the blobs of the labels the bodies were just fitted to; the position term
-                # is no evidence of an outlier, so it joins the log-determinant in the cap
-                extra = position_weight * sigma2 * position_costs(points, lab, n)
-                total, logdet = costs + extra, logdet + extra
-            new, cap = _assign_marginal(total, logdet, dof, sigma2, outlier_p, neighbours)
+            new, costs, total, cap = assign_bodies(obs, W, T, sigma2, lab, outlier_p,
+                                                   neighbours, points, position_weight)
             if np.array_equal(new, lab):
                 break
             lab = new
@@ -300,7 +343,7 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
     W, T = np.array(w_rot, dtype=float), np.zeros((n, 3))
     lab = np.where(dof > 0, np.asarray(rot_labels, dtype=np.int64), -1)
     _fit_each_body(obs, lab, W, T, np.zeros(n, dtype=bool), 6, lambda b: w_rot[b])
-    sigma2 = noise_factor * _robust_sigma2(_best_costs(general_costs(obs, W, T)), dof)
+    sigma2 = noise_factor * measured_noise(obs, W, T)
     return marginal_segmentation(obs, n, starts, W, T, sigma2, outlier_p=outlier_p,
                                  neighbours=neighbours, points=points,
                                  position_weight=position_weight)
