@@ -142,9 +142,10 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     step : bool, optional
         'general', with ``init_motions``: when true and every body has a motion, a tracking
         step instead of a solve: a few LM steps of every body from its motion, the tracks
-        assigned once, no search and no rescan (:func:`.general_method.solve_general`); the
-        tracked solve runs when too few tracks stay inliers. A stream asks for a full solve
-        at a low rate (:data:`.warm.FULL_SOLVE_EVERY`).
+        assigned once, no search (the bodies in ``rescan`` are rescanned;
+        :func:`.general_method.solve_general`); the tracked solve runs instead when too few
+        tracks stay inliers or many would change body. A stream asks for full solves after
+        a search and after a step whose noise jumped (:data:`.warm.FULL_AFTER_SEARCH`).
     warm_inliers : float, optional
         'robust', with ``init_labels``: the share of the usable tracks that the previous
         labels' final pass must keep as inliers to be returned without a search (default

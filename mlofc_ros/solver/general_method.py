@@ -218,8 +218,9 @@ def _step(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarra
     and a translating body's lines went to the background, visp_cube 16% of the moving-phase
     frames right instead of 91%); the published motions are the stepped ones. No search: the
     pipeline's schedule (:mod:`.warm`) asks for full solves. None (the caller runs the
-    tracked solve) when a body has no motion or fewer than :data:`.general.WARM_INLIERS` of
-    the usable tracks stay inliers.
+    tracked solve) when a body has no motion, fewer than :data:`.general.WARM_INLIERS` of
+    the usable tracks stay inliers, or more than :data:`STEP_MOVES` of the labelled tracks
+    would change body.
     """
     w0, t0 = init_motions
     if not np.all(np.isfinite(w0)) or not np.all(np.isfinite(t0)):

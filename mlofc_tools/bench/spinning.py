@@ -37,7 +37,7 @@ node runs (minus DDS). Scored on the frames with a full window, like
   scored frames, max over all frames ('general' runs its full multi-start search on the first
   window of :data:`~mlofc_ros.solver.methods.GENERAL_MIN_FRAMES` frames and whenever tracking
   the previous motions leaves too few inliers; between its full solves it steps,
-  :data:`~mlofc_ros.solver.warm.FULL_SOLVE_EVERY`); ``mean x LSD``: the mean over the scored
+  :data:`~mlofc_ros.solver.warm.FULL_AFTER_SEARCH`); ``mean x LSD``: the mean over the scored
   frames over the median CPU time of OpenCV's default LSD alone on the same frames, measured
   in the same run (the goal of issue #39: at most 1.0).
 
