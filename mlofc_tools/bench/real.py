@@ -494,8 +494,9 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], runs: Dict[str, 
     head = common.run_header(
         f'Real footage: {SEQUENCE} scored by a motion proxy', common.command_line('real', argv),
         {'Sequence': f'`{SEQUENCE}` frames {span[0]}-{span[1]} of the shared real sequences, '
-                     f'640x480 at {FPS:g} frames/s, intrinsics from `cube.xml`; the drag starts at '
-                     f'frame {MOTION_START}, the moving phase (scored) at frame {phase_start}',
+                     f'640x480 at {FPS:g} frames/s, intrinsics from `cube.xml`; the drag '
+                     f'starts at frame {MOTION_START}, the moving phase (scored) at frame '
+                     f'{phase_start}',
          'Pipeline': f'`num_bodies=2`, `window={args.window}`'
                      + ''.join(f', `{k}:={v}`' for k, v in args.params.items()),
          'Proxy': f'{args.proxy} ({PROXIES[args.proxy]}) over {LAG} frames; moving > '
