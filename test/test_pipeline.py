@@ -789,3 +789,33 @@ def test_line_tracks_need_an_image_size_and_do_not_mix_with_images():
     assert obs.gray is None and obs.window_fill == 1
     with pytest.raises(ValueError, match='reset'):
         p.observe(seq.frames[1], seq.stamps[1] + 1.0, seq.camera)
+
+
+def test_a_general_stream_steps_after_its_first_full_solves(monkeypatch):
+    # bodies spinning about their own centres through process_lines with method 'general':
+    # a search, the full solves after it, then tracking steps; labels and ids stay right
+    import mlofc_ros.pipeline as pipeline_module
+    from mlofc_ros.solver.warm import FULL_AFTER_SEARCH
+    from scenes import random_scene
+    tracks, truth, omegas, intr = random_scene(2, 25, n_frames=16, noise=0.2, seed=3,
+                                               own_centre=True)
+    starts = []
+
+    def spy(*args, **kwargs):
+        res = segment_lines(*args, **kwargs)
+        starts.append(res.diagnostics.start)
+        return res
+    monkeypatch.setattr(pipeline_module, 'segment_lines', spy)
+    ids = np.arange(tracks.shape[0])
+    p = Pipeline(num_bodies=2, window=10, method='general')
+    results = [p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+               for k in range(tracks.shape[1])]
+    searched = [i for i, s in enumerate(starts) if s not in (None, 'warm', 'step')]
+    assert len(searched) == 1
+    after = starts[searched[0] + 1:]
+    assert after[:FULL_AFTER_SEARCH] == ['warm'] * FULL_AFTER_SEARCH
+    assert after[FULL_AFTER_SEARCH:] and set(after[FULL_AFTER_SEARCH:]) == {'step'}
+    for r in results[-3:]:                               # steps
+        pairs = {(int(g), int(s)) for g, s in zip(truth, r.labels) if s >= 0}
+        assert len(pairs) == 2 and len({s for _, s in pairs}) == 2
+        assert np.mean(r.labels >= 0) >= 0.9
