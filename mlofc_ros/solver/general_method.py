@@ -231,20 +231,18 @@ def _step(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarra
     start = np.where(prev >= 0, prev, assigned)
     fine = sigma2 * PUBLISH_NOISE_SCALE
     W, T = np.array(w0, dtype=float), np.array(t0, dtype=float)
-    for b in range(n):                                   # bodies, not lines
-        idx = np.flatnonzero(start == b)
-        if idx.size >= 3:
-            W[b], T[b], _ = fit_body(obs, idx, W[b], T[b], STEP_ITERATIONS, fine, fine)
-            if rescan is not None and rescan[b]:
-                W[b], T[b] = _rescanned(obs, idx, W[b], T[b], sigma2)
+    members = {b: np.flatnonzero(start == b) for b in range(n)}     # bodies, not lines
+    members = {b: idx for b, idx in members.items() if idx.size >= 3}
+    for b, idx in members.items():
+        W[b], T[b], _ = fit_body(obs, idx, W[b], T[b], STEP_ITERATIONS, fine, fine)
+        if rescan is not None and rescan[b]:
+            W[b], T[b] = _rescanned(obs, idx, W[b], T[b], sigma2)
     sigma2 = measured_noise(obs, W, T)
     # the labels at the segmentation's inflated noise level, where T's scale matters: the
     # stepped T rescaled there (W held: the state stays the published motion)
     T_labels = T.copy()
-    for b in range(n):                                   # bodies, not lines
-        idx = np.flatnonzero(start == b)
-        if idx.size >= 3:
-            T_labels[b] = rescale_translation(obs, idx, W[b], T[b], NOISE_FACTOR * sigma2)
+    for b, idx in members.items():
+        T_labels[b] = rescale_translation(obs, idx, W[b], T[b], NOISE_FACTOR * sigma2)
     labels, costs, total, cap = assign_bodies(obs, W, T_labels, NOISE_FACTOR * sigma2, start,
                                               neighbours=neighbours, points=obs.midpoints,
                                               position_weight=WARM_POSITION_WEIGHT)

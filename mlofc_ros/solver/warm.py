@@ -69,17 +69,14 @@ class WarmStarts:
 
     def __init__(self) -> None:
         self.motions: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}
-        self.floor: Optional[Tuple[float, int]] = None
-        self.steps = 0
-        self.noise = math.inf
-        self.full_next = False
+        self.reset()
 
     def reset(self) -> None:
         """Forget everything (the body ids restart)."""
         self.motions.clear()
-        self.floor = None
-        self.steps = 0
-        self.noise = math.inf
+        self.floor: Optional[Tuple[float, int]] = None
+        self.steps = 0                   # steps in a row; negative: full solves still due
+        self.noise = math.inf            # the last full solve's noise (px)
         self.full_next = False
 
     def keywords(self, method: Method, labels: Optional[np.ndarray], n: int) -> Dict[str, Any]:

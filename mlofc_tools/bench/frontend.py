@@ -19,7 +19,6 @@ Run ``python -m mlofc_tools.bench frontend`` (or ``python -m mlofc_tools.bench.f
 """
 import argparse
 from collections import defaultdict
-import glob
 import json
 import os
 import pathlib
@@ -32,12 +31,11 @@ from mlofc_ros.segments.detect import has_ximgproc, LineDetector
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_tools.bench import common
-from mlofc_tools.datasets.shared import shared_data_dir
+from mlofc_tools.bench.pipeline import read_real_sequence, REAL_DIR
 from mlofc_tools.scoring import match_to_truth, score_tracks
 import numpy as np
 
 #: Real sequences (no ground truth), see ``/work/shared/data/real/README.md``.
-REAL_DIR = os.environ.get('MLOFC_REAL_DIR', str(shared_data_dir() / 'real'))
 REAL_SEQUENCES = ('visp_cube', 'rubik_cube', 'hamburg_taxi')
 
 
@@ -60,9 +58,9 @@ def real_sequences(root: str, max_frames: int) -> List[Tuple[str, List[np.ndarra
     """Gray frames of the real sequences found under ``root`` (missing ones are skipped)."""
     out = []
     for name in REAL_SEQUENCES:
-        files = sorted(glob.glob(os.path.join(root, name, 'frames', '*.png')))[:max_frames]
-        if files:
-            out.append((name, [cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in files]))
+        frames, _ = read_real_sequence(os.path.join(root, name), max_frames)
+        if frames:
+            out.append((name, frames))
     return out
 
 

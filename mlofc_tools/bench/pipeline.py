@@ -75,19 +75,30 @@ def read_visp_camera(path: str) -> Optional[Tuple[float, float, float, float]]:
     return vals['px'], vals['py'], vals['u0'], vals['v0']
 
 
+def read_real_sequence(folder: str, max_frames: Optional[int] = None
+                       ) -> Tuple[List[np.ndarray], Optional[Tuple[float, float, float, float]]]:
+    """
+    Read the gray frames of a real sequence and its ViSP intrinsics.
+
+    ``folder``: the sequence's folder, ``frames/*.png`` and optionally a ViSP ``*.xml``.
+    Returns the readable frames in name order (the first ``max_frames``) and
+    ``(fx, fy, cx, cy)`` px, or None without an xml file.
+    """
+    import cv2
+    files = sorted(glob.glob(os.path.join(folder, 'frames', '*.png')))[:max_frames]
+    frames = [cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in files]
+    xml = sorted(glob.glob(os.path.join(folder, '*.xml')))
+    return [f for f in frames if f is not None], (read_visp_camera(xml[0]) if xml else None)
+
+
 def real_sequences(root: str, max_frames: int) -> List[Sequence_]:
     """Load the real sequences under ``root`` (``<name>/frames/*.png``), gray, 30 Hz stamps."""
-    import cv2
     out = []
     for d in sorted(glob.glob(os.path.join(root, '*', 'frames'))):
-        files = sorted(glob.glob(os.path.join(d, '*.png')))[:max_frames]
-        frames = [cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in files]
-        frames = [f for f in frames if f is not None]
+        frames, camera = read_real_sequence(os.path.dirname(d), max_frames)
         if len(frames) < 3:
             continue
         name = os.path.basename(os.path.dirname(d))
-        xml = glob.glob(os.path.join(os.path.dirname(d), '*.xml'))
-        camera = read_visp_camera(xml[0]) if xml else None
         out.append(Sequence_(name=name, frames=frames,
                              stamps=[i / 30.0 for i in range(len(frames))], camera=camera,
                              num_bodies=2, kind='real'))

@@ -54,7 +54,6 @@ There is no per-line ground truth, so the score is a motion proxy on the publish
   machine.
 """
 import argparse
-import glob
 import math
 import os
 import sys
@@ -63,10 +62,9 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import cv2
 from mlofc_tools.bench import common
-from mlofc_tools.datasets.shared import shared_data_dir
+from mlofc_tools.bench.pipeline import read_real_sequence, REAL_DIR
 import numpy as np
 
-REAL_DIR = os.environ.get('MLOFC_REAL_DIR', str(shared_data_dir() / 'real'))
 #: The sequence scored (a folder of ``REAL_DIR``).
 SEQUENCE = 'visp_cube'
 #: First frame of the drag (frames before it are nearly still).
@@ -97,28 +95,6 @@ SUMMARY_HEADERS = ['method', 'frames scored', 'moving segments (median)',
                    'LSD CPU ms median', 'mean / LSD']
 FRAME_HEADERS = ['frame', 'method', 'moving segments', 'on moving body %', 'moving -1 %',
                  'still segments', 'still on background %']
-
-
-def read_sequence(folder: str) -> Tuple[List[np.ndarray], Optional[Tuple[float, ...]]]:
-    """
-    Read the gray frames of a real sequence and its ViSP intrinsics.
-
-    Parameters
-    ----------
-    folder
-        The sequence's folder: ``frames/*.png`` and optionally a ViSP ``*.xml``.
-
-    Returns
-    -------
-    frames, camera
-        The frames in name order, and ``(fx, fy, cx, cy)`` px or None without an xml file.
-
-    """
-    from mlofc_tools.bench.pipeline import read_visp_camera
-    files = sorted(glob.glob(os.path.join(folder, 'frames', '*.png')))
-    frames = [cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in files]
-    xml = sorted(glob.glob(os.path.join(folder, '*.xml')))
-    return [f for f in frames if f is not None], (read_visp_camera(xml[0]) if xml else None)
 
 
 def run_method(frames: Sequence[np.ndarray], indices: Sequence[int], camera: Any, method: str,
@@ -553,7 +529,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     revision = common.commit()        # before the runs import the code
     cv2.setNumThreads(1)
     t0 = time.monotonic()
-    frames, camera = read_sequence(os.path.join(args.real_dir, SEQUENCE))
+    frames, camera = read_real_sequence(os.path.join(args.real_dir, SEQUENCE))
     last = len(frames) - 1 if args.last is None else min(args.last, len(frames) - 1)
     if last - args.first < LAG:
         common.eprint(f'real: too few frames of {SEQUENCE} in {args.real_dir}')
