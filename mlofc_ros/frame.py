@@ -148,6 +148,9 @@ class Observation:
         The frame was not processed (duplicate stamp): nothing to solve or publish.
     undistorted : (M, 4) float64 or None
         ``segments`` undistorted (None: the same as ``segments``, no distortion).
+    epoch : int
+        Restarts of the track ids or body ids before this frame (observing side): labels of
+        a solve in another epoch do not apply to this frame's tracks.
 
     """
 
@@ -168,6 +171,7 @@ class Observation:
     elapsed_ms: float = 0.0
     skipped: bool = False
     undistorted: Optional[np.ndarray] = None
+    epoch: int = 0
 
     @classmethod
     def skip(cls, stamp: float, gray: Optional[np.ndarray], problem: str, fill: int

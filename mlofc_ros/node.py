@@ -18,7 +18,7 @@ Topics (relative names, remap as usual)::
 
     sub  image               sensor_msgs/Image              sensor-data QoS (best effort)
     sub  camera_info         sensor_msgs/CameraInfo         sensor-data QoS
-    pub  ~/segments          sensor_msgs/PointCloud2        one per solved image (see below)
+    pub  ~/segments          sensor_msgs/PointCloud2        one per tracked image (see below)
     pub  ~/body_<i>/twist    geometry_msgs/TwistWithCovarianceStamped, i = 0..num_bodies-1
     pub  ~/debug_image       sensor_msgs/Image bgr8         if publish_debug_image or subscribed
     pub  /diagnostics        diagnostic_msgs/DiagnosticArray  1 Hz, see below
@@ -47,9 +47,12 @@ decodes every queued image, tracks its lines and adds them to the window
 the same thread (:meth:`Pipeline.solve`, then publishing). A slow method's
 (:attr:`mlofc_ros.solver.Method.slow`: 1-3 s per window) goes to a solver worker, which
 segments the newest window it has not solved yet while the tracking worker goes on: the
-tracker still sees every frame, so its tracks survive; the frames tracked while the solver
-was busy are not published (counted as dropped, ``unsolved`` in ``stats``) except the newest,
-which it solves next.
+tracker still sees every frame, so its tracks survive. Of the frames tracked while the solver
+was busy it solves the newest next; the others (``unsolved`` in ``stats``, counted as dropped)
+are answered from the running fit (:meth:`Pipeline.carry`): their ``~/segments`` cloud gives
+each segment the body its track had at the last solve (NaN residuals; ``carried`` in
+``stats``), and no twist (only a solve measures one). The clouds' stamps only increase: a solve
+that ends after newer frames were answered so publishes its twists but not its cloud.
 Parameters: see :mod:`mlofc_ros.params` (``ros2 param describe /mlofc <name>``); all can be
 changed at run time, invalid values are rejected with the reason and the old value kept. Write
 doubles as ``-p focal_length:=500.0`` (``:=500`` is accepted too: doubles are declared with
@@ -58,6 +61,7 @@ dynamic typing and integers converted).
 Run: ``ros2 run mlofc_ros mlofc_node --ros-args -r image:=/cam/image_raw -p num_bodies:=3``.
 """
 from collections import deque
+import math
 import re
 import signal
 import threading
@@ -74,6 +78,7 @@ from mlofc_ros.pipeline import FrameResult, Observation, Pipeline
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
                                     segments_msg, stamp_to_seconds, twist_msg)
 from mlofc_ros.solver import get_method
+import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
@@ -159,11 +164,14 @@ class MlofcNode(Node):
         self._frame_id = ''
         #: Seconds a problem keeps ``/diagnostics`` at WARN.
         self.problem_hold = PROBLEM_HOLD
-        #: frame counters: received = processed (published) + dropped + skipped + errors;
-        #: dropped counts the queue's drops and the ``unsolved`` frames (tracked, then replaced
-        #: by a newer one before the solver was free)
+        #: frame counters: received = processed (solved and published) + dropped + skipped +
+        #: errors; dropped counts the queue's drops and the ``unsolved`` frames (tracked, then
+        #: replaced by a newer one before the solver was free), of which ``carried`` got their
+        #: ``~/segments`` from the running fit (Pipeline.carry); ``late``: processed frames
+        #: whose cloud was not published (newer frames were answered first). One cloud per
+        #: processed frame, less the late ones, plus the carried ones.
         self.stats = {'received': 0, 'processed': 0, 'dropped': 0, 'skipped': 0, 'errors': 0,
-                      'unsolved': 0}
+                      'unsolved': 0, 'carried': 0, 'late': 0}
         self.last_result: Optional[FrameResult] = None
 
         self._pipeline = Pipeline(**{k: values[k] for k in P.names('pipeline')})
@@ -189,6 +197,9 @@ class MlofcNode(Node):
         # the newest observation waiting for the solver (with its image header and debug
         # flag), and whether the solver is busy: guarded by _lock, signalled by _solve_wake
         self._observed: Optional[Tuple[Any, Observation, bool]] = None
+        # (epoch, stamp) of the last ~/segments published: a solve that ends after newer
+        # frames went out from the running fit publishes its twists, not its stale cloud
+        self._cloud_key: Tuple[int, float] = (-1, -math.inf)
         self._solving = False
         self._last_solve_s = 0.0            # wall time of the last solve
         self._solve_wake = threading.Condition(self._lock)
@@ -337,6 +348,7 @@ class MlofcNode(Node):
             'frames processed': stats['processed'],
             'frames dropped': stats['dropped'],
             'frames tracked, not solved': stats['unsolved'],
+            'frames carried from the running fit': stats['carried'],
             'frames skipped': stats['skipped'],
             'errors': stats['errors'],
             'last problem': problem[1] if problem is not None else 'none',
@@ -419,18 +431,41 @@ class MlofcNode(Node):
             inline = (self._observed is None and not self._solving
                       and self._last_solve_s < INLINE_SOLVE_S
                       and not get_method(self._pipeline.params['method']).slow)
+            older = None
             if inline:
                 self._solving = True
             else:
                 if self._observed is not None:
-                    # the solver is behind: the newer window replaces the unsolved one
-                    obs = obs.replacing(self._observed[1])
+                    # the solver is behind: the newer window replaces the unsolved one, which
+                    # is answered from the running fit
+                    older = self._observed
+                    obs = obs.replacing(older[1])
                     self.stats['dropped'] += 1
                     self.stats['unsolved'] += 1
                 self._observed = (msg.header, obs, debug)
                 self._solve_wake.notify_all()
         if inline:
             self._solve_guarded(msg.header, obs, debug)
+        elif older is not None:
+            self._publish_carried(older[0], older[1])
+
+    def _publish_carried(self, header: Any, obs: Observation) -> None:
+        """Publish the ``~/segments`` of an unsolved frame from the running fit."""
+        r = self._pipeline.carry(obs)
+        if not np.any(r.carried) or not self._claim_cloud(obs):
+            return
+        self._seg_pub.publish(segments_msg(header, r.segments, r.track_ids, r.labels,
+                                           r.residuals, r.rays))
+        self._count('carried')
+
+    def _claim_cloud(self, obs: Observation) -> bool:
+        """Return whether the ``~/segments`` of ``obs`` is newer than the last published."""
+        key = (obs.epoch, obs.stamp)
+        with self._lock:
+            if key <= self._cloud_key:
+                return False
+            self._cloud_key = key
+            return True
 
     def _run_solver(self) -> None:
         """Solver worker: solve the newest observation and publish its frame's outputs."""
@@ -464,12 +499,18 @@ class MlofcNode(Node):
         if result.problem:
             self._warn('pipeline', result.problem)
         self.last_result = result           # before publishing: a subscriber may look at it
-        self._publish(header, obs.gray, result, debug)
+        cloud = self._claim_cloud(obs)
+        self._publish(header, obs.gray, result, debug, cloud)
+        if not cloud:
+            self._count('late')
         self._count('processed')
 
-    def _publish(self, header: Any, gray: Any, r: FrameResult, debug: bool) -> None:
-        self._seg_pub.publish(segments_msg(header, r.segments, r.track_ids, r.labels,
-                                           r.residuals, r.rays))
+    def _publish(self, header: Any, gray: Any, r: FrameResult, debug: bool,
+                 cloud: bool = True) -> None:
+        """Publish a solved frame: twists, debug image, and its cloud when ``cloud``."""
+        if cloud:
+            self._seg_pub.publish(segments_msg(header, r.segments, r.track_ids, r.labels,
+                                               r.residuals, r.rays))
         with self._pub_lock:
             if self._values['num_bodies'] == 0:
                 self._grow_twist_publishers(len(r.angular_velocities))

@@ -101,6 +101,11 @@ class Pipeline:
         # where the track ids come from: 'image' (this pipeline's tracker, observe) or
         # 'lines' (the caller's, observe_lines); None until the first frame
         self._source: Optional[str] = None
+        # restarts of track or body ids seen by observe (Observation.epoch), and the last
+        # solve's labels by track id for carry(): (epoch, track ids, stable ids, focal length),
+        # replaced in one assignment by the solving thread, read by the observing one
+        self._epoch = 0
+        self._running: Optional[Tuple[int, np.ndarray, np.ndarray, float]] = None
 
     # --- configuration -------------------------------------------------------------------
 
@@ -133,6 +138,8 @@ class Pipeline:
         if 'num_bodies' in changed:
             self.bodies.reset()
             self._warm.reset()
+        if changed & {'num_bodies', 'min_segment_length'}:
+            self._running = None
 
     def reset(self) -> None:
         """
@@ -151,6 +158,7 @@ class Pipeline:
         self._forget_focal()
         self._pending_resets = set()
         self._source = None
+        self._running = None
 
     def _forget_focal(self) -> None:
         self._focal_samples.clear()
@@ -353,13 +361,16 @@ class Pipeline:
         timings['window'] = (time.perf_counter() - t) * 1e3
         resets |= self._pending_resets
         self._pending_resets = set()
+        if resets & {'tracks', 'bodies'}:
+            self._epoch += 1
         return Observation(stamp=stamp, gray=gray, segments=segments, track_ids=track_ids,
                            win_ids=win_ids, win_tracks=win_tracks, intrinsics=intrinsics,
                            image_size=size, window_fill=len(self._stamps),
                            frame_interval=self._frame_interval(), blank=blank,
                            problems=problems, timings=timings, resets=frozenset(resets),
                            elapsed_ms=(time.perf_counter() - t0) * 1e3,
-                           undistorted=corrected if corrected is not segments else None)
+                           undistorted=corrected if corrected is not segments else None,
+                           epoch=self._epoch)
 
     def _check_image_size(self, size: Tuple[int, int], problems: List[str],
                           resets: Set[str]) -> None:
@@ -489,6 +500,36 @@ class Pipeline:
             frame_interval=obs.frame_interval, n_tracks=int(len(obs.win_ids)), rays=rays,
             **out)
 
+    def carry(self, obs: Observation) -> FrameResult:
+        """
+        Return the result of ``obs`` from the running fit, without solving its window.
+
+        For a frame the solver has no time for (the node's solver worker is busy): each
+        segment takes the stable body id its track had at the last solve (``-1`` for a track
+        that solve did not label or did not see, or after a restart of the track or body
+        ids), marked :attr:`FrameResult.carried`; residuals are NaN and no body is valid (an
+        angular velocity is published only from a solve). Call from the observing thread,
+        alongside :meth:`solve` in another: it reads the last solve's labels, which a solve
+        replaces in one assignment; it changes no state.
+        """
+        t0 = time.perf_counter()
+        running = self._running
+        fields = unsolved_fields(obs, self.n_bodies)
+        focal = math.nan if obs.intrinsics is None else float(obs.intrinsics[0])
+        if running is not None and running[0] == obs.epoch and not obs.skipped:
+            labels = lookup(obs.track_ids, running[1], running[2], -1).astype(np.int32)
+            fields.update(labels=labels, carried=labels >= 0)
+            focal = running[3] if obs.intrinsics is None else focal
+        rays = segment_rays(obs.segments if obs.undistorted is None else obs.undistorted,
+                            ray_intrinsics(obs, focal))
+        timings = dict(obs.timings)
+        timings['total'] = obs.elapsed_ms + (time.perf_counter() - t0) * 1e3
+        return FrameResult(
+            stamp=obs.stamp, segments=obs.segments, track_ids=obs.track_ids, timings=timings,
+            window_fill=obs.window_fill, problem=None, focal_length=focal,
+            frame_interval=obs.frame_interval, n_tracks=int(len(obs.win_ids)), rays=rays,
+            skipped=obs.skipped, **fields)
+
     def _apply_resets(self, resets: FrozenSet[str]) -> None:
         """Reset the solve side as an observation asks (see :attr:`Observation.resets`)."""
         if 'tracks' in resets:
@@ -560,6 +601,7 @@ class Pipeline:
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)
         labels, carried = self._segment_labels(obs, res.labels, mapping)
+        self._running = (obs.epoch, np.array(obs.track_ids), labels, float(res.focal_length))
         self._sample_focal(obs, float(res.focal_length))
         residuals = lookup(obs.track_ids, obs.win_ids,
                            np.asarray(res.residuals, dtype=np.float32), np.nan)

@@ -111,13 +111,24 @@ class Harness(DdsHarness):
         return super().get_params(f'{self.ns}/mlofc', *names)
 
     def accounting(self) -> Dict[str, int]:
-        """Check received = processed + dropped + skipped and one cloud per processed frame."""
+        """
+        Check received = processed + dropped + skipped, and the clouds.
+
+        One cloud per processed frame but the late ones, plus one per frame answered from the
+        running fit; their stamps increasing.
+        """
+        def published() -> int:
+            s = self.mlofc.stats
+            return s['processed'] - s['late'] + s['carried']
         assert self.wait(lambda: self.mlofc.pending_frames() == 0
-                         and len(self.clouds) == self.mlofc.stats['processed'], 10.0)
+                         and len(self.clouds) == published(), 10.0)
         s = dict(self.mlofc.stats)
         assert s['processed'] + s['dropped'] + s['skipped'] + s['errors'] == s['received'], s
         assert s['errors'] == 0, s
-        assert len(self.clouds) == s['processed'], s
+        assert len(self.clouds) == s['processed'] - s['late'] + s['carried'], s
+        assert s['carried'] <= s['unsolved'] <= s['dropped'], s
+        stamps = [(c.header.stamp.sec, c.header.stamp.nanosec) for c in self.clouds]
+        assert all(a < b for a, b in zip(stamps, stamps[1:])) or s['carried'] == 0, stamps
         return s
 
     def close(self) -> None:

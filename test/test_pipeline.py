@@ -278,6 +278,38 @@ def test_observe_and_solve_split_and_a_dropped_observation_keeps_its_resets(monk
     assert obs.resets == {'tracks'} and obs.window_fill == 1
 
 
+def test_carry_answers_an_unsolved_frame_from_the_last_solve():
+    """
+    Label an unsolved frame's segments as their tracks were at the last solve.
+
+    The node answers the frames its busy solver skips this way; nothing before a first
+    solve, and nothing across a restart of the track or body ids.
+    """
+    seq = small_sequence()
+    p = Pipeline(num_bodies=2, window=3)
+    first = p.observe(seq.frames[0], seq.stamps[0], seq.camera)
+    r = p.carry(first)                                   # no solve yet: nothing to carry
+    assert np.all(r.labels == -1) and not r.carried.any() and not r.body_valid.any()
+    for i in range(4):
+        solved = p.process(seq.frames[i + 1], seq.stamps[i + 1], seq.camera)
+    assert np.count_nonzero(solved.labels >= 0) > 10
+    obs = p.observe(seq.frames[5], seq.stamps[5], seq.camera)
+    r = p.carry(obs)
+    known = {int(t): int(lab) for t, lab in zip(solved.track_ids, solved.labels)}
+    expect = np.array([known.get(int(t), -1) for t in obs.track_ids])
+    np.testing.assert_array_equal(r.labels, expect)
+    assert np.count_nonzero(r.labels >= 0) > 10
+    np.testing.assert_array_equal(r.carried, expect >= 0)
+    assert np.all(np.isnan(r.residuals)) and not r.body_valid.any()
+    assert r.stamp == obs.stamp and r.segments is obs.segments and not r.solved
+    assert r.rays.shape == (len(obs.segments), 3) and np.all(np.isfinite(r.rays))
+    # carrying changes nothing: the frame is still solved as if it had not been carried
+    assert p.solve(obs).stamp == obs.stamp
+    back = p.observe(seq.frames[6], seq.stamps[1], seq.camera)      # bag loop: ids restart
+    assert back.epoch == obs.epoch + 1
+    assert np.all(p.carry(back).labels == -1)
+
+
 def test_a_gap_in_the_stamps_restarts_the_window():
     seq = small_sequence()
     p = Pipeline(num_bodies=2, window=3, max_frame_gap=3.0)

@@ -26,8 +26,10 @@ Scored like ``bench spinning`` (segments matched to true edges, stable body ids 
 by overlap; ``per frame``: the ids matched in every frame on its own, the segmentation without
 the id switches), on the answered frames from the window's ``window``-th frame on. Also reported:
 the frames the node answered (``~/segments``), the frames it tracked but did not solve (the
-solver was busy; the node counts them as dropped, ``unsolved``) and the frames its queue
-dropped before tracking.
+solver was busy; the node counts them as dropped, ``unsolved``), those of them it answered
+from the running fit (each segment labelled as its track was at the last solve,
+``carried``; scored like the solved ones, without angular velocities) and the frames its
+queue dropped before tracking.
 """
 import argparse
 import math
@@ -171,12 +173,13 @@ def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
     return {'published': len(stamps), 'received': int(stats.get('received', 0)),
             'answered': sum(g is not None for g in got), 'scored': len(scored),
             'unsolved': int(stats.get('unsolved', 0)),
+            'carried': int(stats.get('carried', 0)),
             'queue_dropped': int(stats.get('dropped', 0)) - int(stats.get('unsolved', 0)),
             'score': score}
 
 
 HEADERS = ['scene', 'seed', 'rate Hz', 'published', 'answered', 'tracked, not solved',
-           'dropped before tracking', 'scored frames', 'wrong %', 'per frame', '-1 %',
+           'answered from the running fit', 'dropped before tracking', 'scored frames', 'wrong %', 'per frame', '-1 %',
            'omega err % (boxes)', 'boxes with omega err <= 5%']
 
 
@@ -187,7 +190,7 @@ def build_rows(records: Sequence[Dict[str, Any]]) -> List[List[object]]:
         err = np.asarray(sc['omega_err']) if sc else np.zeros(0)
         moving = err[np.isfinite(err)] if sc else err
         rows.append([r['scene'], r['seed'], r['rate'], r['published'], r['answered'],
-                     r['unsolved'], r['queue_dropped'], r['scored'],
+                     r['unsolved'], r['carried'], r['queue_dropped'], r['scored'],
                      100 * sc['wrong'] if sc else math.nan,
                      100 * sc['wrong_frame'] if sc else math.nan,
                      100 * sc['unassigned'] if sc else math.nan,
