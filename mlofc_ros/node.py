@@ -446,7 +446,7 @@ class MlofcNode(Node):
                 self._solve_wake.notify_all()
         if inline:
             self._solve_guarded(msg.header, obs, debug)
-        elif older is not None:
+        elif older is not None and self._values['carry_labels']:
             self._publish_carried(older[0], older[1])
 
     def _publish_carried(self, header: Any, obs: Observation) -> None:

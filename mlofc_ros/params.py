@@ -179,6 +179,11 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               'Images waiting for the tracking worker; when full, the stalest is dropped '
               '(the solver takes the newest tracked frame, see the README).',
               range=(1, 100), scope='node'),
+    ParamSpec('carry_labels', bool, True,
+              'Answer the frames the solver has no time for from the running fit: each '
+              'segment labelled as its track was at the last solve (NaN residuals, no twist); '
+              'false = publish solved frames only.',
+              scope='node'),
     ParamSpec('warn_period', float, 5.0,
               'Minimum seconds between two warnings about the same kind of bad input.',
               range=(0.0, 3600.0), scope='node'),

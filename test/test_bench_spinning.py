@@ -79,3 +79,13 @@ def test_spinning_takes_node_parameters():
     args = spinning.parse_args(['-p', 'detector_scale:=1.0', '-p', 'detect_every:=2'])
     assert args.params == {'detector_scale': 1.0, 'detect_every': 2}
     assert spinning.parse_args([]).params == {}
+
+
+def test_every_scene_renders_its_own_ranges():
+    for name, scene in spinning.SCENES.items():
+        seq = spinning.render_scene(name, 0, 2)
+        assert len(seq.body_names) == scene.boxes + scene.background, name
+        speeds = np.degrees([np.linalg.norm(w) for w in seq.angular_velocities])
+        moving = speeds[speeds > 0]
+        lo, hi = scene.speed_deg_s
+        assert moving.size == scene.boxes and np.all((moving >= lo) & (moving <= hi)), name

@@ -357,7 +357,8 @@ def test_frames_the_node_drops_itself_never_restart_the_window(harness):
     """
     seq = small_sequence()
     h = harness('/rob_drops', queue_size=1, warn_period=0.0, focal_length=300.0, window=5,
-                max_frame_gap=1.5)          # a single missing frame would be a gap
+                max_frame_gap=1.5,          # a single missing frame would be a gap
+                carry_labels=False)         # solved frames only
     pipe = h.mlofc._pipeline
     observe, solve = pipe.observe, pipe.solve
 
@@ -381,6 +382,7 @@ def test_frames_the_node_drops_itself_never_restart_the_window(harness):
     s = h.accounting()
     assert s['received'] == 3 + len(stamps), s          # all arrived: no gap but the node's
     assert s['dropped'] - s['unsolved'] >= 3, s          # the queue's own drops
+    assert s['carried'] == 0 and len(h.clouds) == s['processed'] - s['late'], s
     assert not h.warnings('window restarted'), h.warnings('window restarted')
     assert h.mlofc.last_result.window_fill == 5
     # a gap in the camera's stream still restarts the window

@@ -297,8 +297,20 @@ def test_custom_camera_and_size():
 @pytest.mark.parametrize('kwargs', [
     {'n_boxes': 0}, {'n_boxes': 5}, {'n_frames': 0}, {'motion': 'spin'}, {'fps': 0.0},
     {'noise_sigma': -1.0}, {'angular_speed_deg_s': (10.0, 5.0)}, {'size': (8, 8)},
-    {'distortion': (0.1, 0.0)},
+    {'distortion': (0.1, 0.0)}, {'depth_range': (0.0, 4.0)}, {'depth_range': (5.0, 4.0)},
+    {'depth_range': (4.0, 11.0)},
 ])
 def test_invalid_arguments(kwargs):
     with pytest.raises(ValueError):
         render_sequence(**kwargs)
+
+
+def test_depth_range_places_the_boxes():
+    near = render_sequence(n_boxes=2, n_frames=1, size=(320, 240), background=False,
+                           motion='own_centre', seed=3, depth_range=(2.0, 2.5))
+    far = render_sequence(n_boxes=2, n_frames=1, size=(320, 240), background=False,
+                          motion='own_centre', seed=3, depth_range=(7.5, 8.0))
+    for seq, (lo, hi) in ((near, (2.0, 2.5)), (far, (7.5, 8.0))):
+        depths = [float(np.asarray(c)[2]) for c in seq.pivots]
+        assert all(lo <= z <= hi for z in depths), depths
+        assert np.bincount(seq.truth[0].body_ids).min() >= 10      # both boxes in view

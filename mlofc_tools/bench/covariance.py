@@ -95,10 +95,7 @@ def box_nees(seq, outs, first: int) -> List[Dict[str, float]]:
 def run_one(item: Tuple[Tuple[str, str, str, int], int, int]) -> Dict[str, object]:
     """One configuration on one seed (module level: run in a worker process)."""
     (label, scene, method, window), seed, frames = item
-    from mlofc_tools.render import render_sequence
-    motion, boxes, background = spinning.SCENES[scene]
-    seq = render_sequence(n_boxes=boxes, n_frames=frames, size=(640, 480), motion=motion,
-                          background=background, seed=seed)
+    seq = spinning.render_scene(scene, seed, frames)
     outs = spinning.run_pipeline(seq, method, window)
     return {'label': label, 'seed': seed,
             'boxes': box_nees(seq, outs, min(window - 1, frames - 1))}

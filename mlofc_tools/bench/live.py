@@ -222,17 +222,14 @@ def summary_rows(records: Sequence[Dict[str, Any]]) -> List[List[object]]:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
-    from mlofc_tools.render import render_sequence
     t0 = time.monotonic()
     load = os.getloadavg()
     revision = common.commit()        # before the runs: the code they ran
     records = []
     with tempfile.TemporaryDirectory(prefix='mlofc_live_') as tmp:
         for scene in args.scene_list:
-            motion, boxes, background = spinning.SCENES[scene]
             for seed in args.seed_list:
-                seq = render_sequence(n_boxes=boxes, n_frames=args.frames, size=(640, 480),
-                                      motion=motion, background=background, seed=seed)
+                seq = spinning.render_scene(scene, seed, args.frames)
                 for rate in args.rate_list:
                     rec = dict(run_one(args, seq, rate, pathlib.Path(tmp)), scene=scene,
                                seed=seed, rate=rate)

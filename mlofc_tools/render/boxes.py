@@ -253,14 +253,16 @@ def render_sequence(n_boxes: int = 2, n_frames: int = 20, size: Tuple[int, int] 
                     noise_sigma: float = 2.0, fps: float = 30.0, seed: Optional[int] = 0,
                     camera: CameraLike = None,
                     angular_speed_deg_s: Tuple[float, float] = (60.0, 150.0),
-                    distortion: Optional[Sequence[float]] = None) -> RenderedSequence:
+                    distortion: Optional[Sequence[float]] = None,
+                    depth_range: Tuple[float, float] = (4.0, 8.0)) -> RenderedSequence:
     """
     Render ``n_frames`` gray frames of ``n_boxes`` rotating striped boxes, with ground truth.
 
     Parameters
     ----------
     n_boxes
-        1..4 cuboids (depth 4..8 scene units, laid out so they stay apart in the image).
+        1..4 cuboids (laid out so they stay apart in the image, at depths in
+        ``depth_range``).
     n_frames
         number of frames (>= 1), frame ``i`` at ``i / fps`` seconds.
     size
@@ -284,6 +286,9 @@ def render_sequence(n_boxes: int = 2, n_frames: int = 20, size: Tuple[int, int] 
     distortion
         plumb_bob ``(k1, k2, p1, p2, k3)``; frames then show the distortion
         (rendered as pinhole, warped with ``cv2.remap``) and ``camera.d`` carries it.
+    depth_range
+        ``(min, max)`` of the uniform box centre depths, scene units, at most 9 (the wall is
+        at ~12); a box's size follows from its image cell and depth.
 
     The scene is planned over the whole sequence: for ``'camera_centre'`` the boxes' mid-sequence
     positions are laid out and each rotation axis is drawn in a cone about the box's line of
@@ -311,6 +316,10 @@ def render_sequence(n_boxes: int = 2, n_frames: int = 20, size: Tuple[int, int] 
     lo, hi = (float(x) for x in angular_speed_deg_s)
     if not (0 <= lo <= hi and math.isfinite(hi)):
         raise ValueError(f'angular_speed_deg_s must be 0 <= min <= max, got {angular_speed_deg_s}')
+    z_lo, z_hi = (float(x) for x in depth_range)
+    if not (0 < z_lo <= z_hi <= 9.0):
+        raise ValueError(f'depth_range must be 0 < min <= max <= 9 (the wall is at ~12), got '
+                         f'{depth_range}')
     cam = _make_camera((width, height), camera, distortion)
     warp = _Warp(cam, (width, height))
     scene_ss, noise_ss = np.random.SeedSequence(seed).spawn(2)
@@ -322,7 +331,7 @@ def render_sequence(n_boxes: int = 2, n_frames: int = 20, size: Tuple[int, int] 
     if background:
         bodies.append(make_background(rng, cam.K, warp.canvas))
     bodies.extend(place_boxes(rng, int(n_boxes), (width, height), cam.K, motion, stamps,
-                              (lo, hi)))
+                              (lo, hi), (z_lo, z_hi)))
     face_offset = np.concatenate([[0], np.cumsum([len(b.face_normal) for b in bodies])])
     edge_offset = np.concatenate([[0], np.cumsum([len(b.edge_a) for b in bodies])])
 

@@ -303,12 +303,13 @@ def _cone_axis(rng: np.random.Generator, centre: np.ndarray, max_angle: float) -
 
 
 def place_boxes(rng: np.random.Generator, n_boxes: int, size: Tuple[int, int], K: np.ndarray,
-                motion: str, stamps: np.ndarray,
-                speed_range: Tuple[float, float]) -> List[Body]:
+                motion: str, stamps: np.ndarray, speed_range: Tuple[float, float],
+                depth_range: Tuple[float, float] = (4.0, 8.0)) -> List[Body]:
     """
     Sample ``n_boxes`` striped boxes and motions that stay in view and apart for all stamps.
 
-    Boxes sit in a layout of image cells at depth 4..8; their bounding circles (projected
+    Boxes sit in a layout of image cells at a depth drawn from ``depth_range`` (scene units;
+    a box's size follows from its image cell and depth); their bounding circles (projected
     bounding spheres) stay inside the image and overlap by at most ~10% of the radii sum in
     every frame.  For ``motion='camera_centre'`` the rotation moves the box across the image,
     so the axis is drawn in a cone about the box's mid-sequence line of sight that narrows
@@ -330,7 +331,7 @@ def place_boxes(rng: np.random.Generator, n_boxes: int, size: Tuple[int, int], K
             u = uc + rng.uniform(-jit, jit) * cw
             v = vc + rng.uniform(-jit, jit) * ch
             r_px = rng.uniform(0.36, 0.46) * min(cw, ch)
-            z = rng.uniform(4.0, 8.0)
+            z = rng.uniform(*depth_range)
             c_mid = z * (kinv @ np.array([u, v, 1.0]))
             speed = rng.uniform(lo, hi)
             if motion == 'own_centre':
