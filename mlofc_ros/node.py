@@ -200,6 +200,7 @@ class MlofcNode(Node):
         # (epoch, stamp) of the last ~/segments published: a solve that ends after newer
         # frames went out from the running fit publishes its twists, not its stale cloud
         self._cloud_key: Tuple[int, float] = (-1, -math.inf)
+        self._cloud_lock = threading.Lock()
         self._solving = False
         self._last_solve_s = 0.0            # wall time of the last solve
         self._solve_wake = threading.Condition(self._lock)
@@ -452,19 +453,19 @@ class MlofcNode(Node):
     def _publish_carried(self, header: Any, obs: Observation) -> None:
         """Publish the ``~/segments`` of an unsolved frame from the running fit."""
         r = self._pipeline.carry(obs)
-        if not np.any(r.carried) or not self._claim_cloud(obs):
-            return
-        self._seg_pub.publish(segments_msg(header, r.segments, r.track_ids, r.labels,
-                                           r.residuals, r.rays))
-        self._count('carried')
+        if np.any(r.carried) and self._publish_cloud(header, obs, r):
+            self._count('carried')
 
-    def _claim_cloud(self, obs: Observation) -> bool:
-        """Return whether the ``~/segments`` of ``obs`` is newer than the last published."""
+    def _publish_cloud(self, header: Any, obs: Observation, r: FrameResult) -> bool:
+        """Publish the ``~/segments`` of ``obs`` if newer than the last one; return whether."""
         key = (obs.epoch, obs.stamp)
-        with self._lock:
+        # held while publishing: the other worker's cloud must not go out in between
+        with self._cloud_lock:
             if key <= self._cloud_key:
                 return False
             self._cloud_key = key
+            self._seg_pub.publish(segments_msg(header, r.segments, r.track_ids, r.labels,
+                                               r.residuals, r.rays))
             return True
 
     def _run_solver(self) -> None:
@@ -499,18 +500,13 @@ class MlofcNode(Node):
         if result.problem:
             self._warn('pipeline', result.problem)
         self.last_result = result           # before publishing: a subscriber may look at it
-        cloud = self._claim_cloud(obs)
-        self._publish(header, obs.gray, result, debug, cloud)
-        if not cloud:
+        if not self._publish_cloud(header, obs, result):
             self._count('late')
+        self._publish(header, obs.gray, result, debug)
         self._count('processed')
 
-    def _publish(self, header: Any, gray: Any, r: FrameResult, debug: bool,
-                 cloud: bool = True) -> None:
-        """Publish a solved frame: twists, debug image, and its cloud when ``cloud``."""
-        if cloud:
-            self._seg_pub.publish(segments_msg(header, r.segments, r.track_ids, r.labels,
-                                               r.residuals, r.rays))
+    def _publish(self, header: Any, gray: Any, r: FrameResult, debug: bool) -> None:
+        """Publish a solved frame's twists and debug image (its cloud: _publish_cloud)."""
         with self._pub_lock:
             if self._values['num_bodies'] == 0:
                 self._grow_twist_publishers(len(r.angular_velocities))
