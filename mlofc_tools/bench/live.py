@@ -179,7 +179,8 @@ def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
 
 
 HEADERS = ['scene', 'seed', 'rate Hz', 'published', 'answered', 'tracked, not solved',
-           'answered from the running fit', 'dropped before tracking', 'scored frames', 'wrong %', 'per frame', '-1 %',
+           'answered from the running fit', 'dropped before tracking', 'scored frames',
+           'wrong %', 'per frame', '-1 %',
            'omega err % (boxes)', 'boxes with omega err <= 5%']
 
 

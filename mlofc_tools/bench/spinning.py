@@ -54,6 +54,7 @@ from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple
 from mlofc_tools.bench import common
 import numpy as np
 
+
 class Scene(NamedTuple):
     """A rendered scene family (:func:`mlofc_tools.render.render_sequence` arguments)."""
 
