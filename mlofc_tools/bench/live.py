@@ -28,8 +28,8 @@ the id switches), on the answered frames from the window's ``window``-th frame o
 the frames the node answered (``~/segments``), the frames it tracked but did not solve (the
 solver was busy; the node counts them as dropped, ``unsolved``), those of them it answered
 from the running fit (each segment labelled as its track was at the last solve,
-``carried``; scored like the solved ones, without angular velocities) and the frames its
-queue dropped before tracking.
+``carried``; scored like the solved ones, without angular velocities; ``wrong % of the solved
+frames`` leaves them out) and the frames its queue dropped before tracking.
 """
 import argparse
 import math
@@ -132,15 +132,17 @@ def answers(bench: LiveBench, stamps: Sequence[int], n_bodies: int) -> List[Any]
             if cloud is None:
                 out.append(None)
                 continue
-            segs, _, labels, _ = parse_segments_msg(cloud)
+            segs, _, labels, residuals = parse_segments_msg(cloud)
             w = np.full((n_bodies, 3), np.nan)
             valid = np.zeros(n_bodies, bool)
             for i in range(n_bodies):
                 m = bench.twists[i].get(ns)
                 if m is not None:
                     w[i], valid[i] = parse_twist_msg(m)[0], True
+            # a solved frame has residuals; one answered from the running fit has none
             out.append(SimpleNamespace(segments=segs, labels=labels.astype(np.int64),
-                                       angular_velocities=w, body_valid=valid))
+                                       angular_velocities=w, body_valid=valid,
+                                       solved=bool(np.any(np.isfinite(residuals)))))
     return out
 
 
@@ -166,21 +168,27 @@ def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
         got = answers(bench, stamps, n_bodies)
     first = min(args.window - 1, len(stamps) - 1)
     scored = [f for f in range(first, len(stamps)) if got[f] is not None]
-    sub = SimpleNamespace(body_names=seq.body_names, truth=[seq.truth[f] for f in scored],
-                          angular_velocities=seq.angular_velocities, pivots=seq.pivots)
-    score = (spinning.score_run(sub, [(got[f], math.nan) for f in scored], 0) if scored
-             else None)
+    solved = [f for f in scored if got[f].solved]
     return {'published': len(stamps), 'received': int(stats.get('received', 0)),
             'answered': sum(g is not None for g in got), 'scored': len(scored),
             'unsolved': int(stats.get('unsolved', 0)),
             'carried': int(stats.get('carried', 0)),
             'queue_dropped': int(stats.get('dropped', 0)) - int(stats.get('unsolved', 0)),
-            'score': score}
+            'score': _score(seq, got, scored), 'solved': _score(seq, got, solved)}
+
+
+def _score(seq: Any, got: Sequence[Any], frames: Sequence[int]) -> Optional[Dict[str, Any]]:
+    """:func:`spinning.score_run` of the answers ``got`` on ``frames``; None for no frame."""
+    if not frames:
+        return None
+    sub = SimpleNamespace(body_names=seq.body_names, truth=[seq.truth[f] for f in frames],
+                          angular_velocities=seq.angular_velocities, pivots=seq.pivots)
+    return spinning.score_run(sub, [(got[f], math.nan) for f in frames], 0)
 
 
 HEADERS = ['scene', 'seed', 'rate Hz', 'published', 'answered', 'tracked, not solved',
            'answered from the running fit', 'dropped before tracking', 'scored frames',
-           'wrong %', 'per frame', '-1 %',
+           'wrong %', 'per frame', '-1 %', 'wrong % of the solved frames',
            'omega err % (boxes)', 'boxes with omega err <= 5%']
 
 
@@ -195,6 +203,7 @@ def build_rows(records: Sequence[Dict[str, Any]]) -> List[List[object]]:
                      100 * sc['wrong'] if sc else math.nan,
                      100 * sc['wrong_frame'] if sc else math.nan,
                      100 * sc['unassigned'] if sc else math.nan,
+                     100 * r['solved']['wrong'] if r['solved'] else math.nan,
                      ' / '.join(f'{100 * e:.0f}' for e in moving) if sc else '',
                      float(np.mean(moving <= 0.05)) if moving.size else math.nan])
     return rows
@@ -216,7 +225,11 @@ def summary_rows(records: Sequence[Dict[str, Any]]) -> List[List[object]]:
                      float(np.mean([100 * r['score']['unassigned'] for r in rs])),
                      100 * float(np.median(err)) if err.size else math.nan,
                      float(np.mean(err <= 0.05)) if err.size else math.nan,
-                     float(np.mean([r['answered'] / r['published'] for r in rs]))])
+                     float(np.mean([r['answered'] / r['published'] for r in rs])),
+                     float(np.mean([100 * r['solved']['wrong'] for r in rs if r['solved']]
+                                   or [math.nan])),
+                     float(np.mean([r['answered'] - r['carried'] for r in rs])
+                           / rs[0]['published'])])
     return rows
 
 
@@ -252,7 +265,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         common.markdown_table(['scene', 'rate Hz', 'runs', 'wrong % (mean)', 'wrong % (worst)',
                                'per frame (mean)', '-1 % (mean)',
                                'omega err % (median over boxes)', 'boxes with omega err <= 5%',
-                               'answered share'],
+                               'answered share', 'wrong % of the solved frames (mean)',
+                               'solved share'],
                               summary_rows(records)),
         '',
         '## Every run',
