@@ -515,11 +515,13 @@ class Pipeline:
         t0 = time.perf_counter()
         running = self._running
         fields = unsolved_fields(obs, self.n_bodies)
-        focal = math.nan if obs.intrinsics is None else float(obs.intrinsics[0])
+        focal = math.nan                                 # the last solve's estimate, if any
         if running is not None and running[0] == obs.epoch and not obs.skipped:
             labels = lookup(obs.track_ids, running[1], running[2], -1).astype(np.int32)
             fields.update(labels=labels, carried=labels >= 0)
-            focal = running[3] if obs.intrinsics is None else focal
+            focal = running[3]
+        if obs.intrinsics is not None:
+            focal = float(obs.intrinsics[0])
         rays = segment_rays(obs.segments if obs.undistorted is None else obs.undistorted,
                             ray_intrinsics(obs, focal))
         timings = dict(obs.timings)
