@@ -25,11 +25,13 @@ minimum, not a wider one.
 """
 import numpy as np
 
-from .model import _costs2, _design, _evaluate, LineObservations
+from .jacobian import normal_equations
+from .model import _costs2, LineObservations
+from ..lines import orthonormal_pair
 
 
 def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
-                    sigma2: float, step: float = 1e-6, marginal: bool = False) -> np.ndarray:
+                    sigma2: float, marginal: bool = False) -> np.ndarray:
     """
     Return the covariance ``(3, 3)`` of a body's rotation vector from the Gauss-Newton information.
 
@@ -41,16 +43,12 @@ def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np
     if idx.size < 3:
         return np.full((3, 3), np.inf)
     rows = obs.rows[idx]
-    _, n0 = _costs2(rows, obs.m_first[idx], w, t, sigma2 if marginal else None)
-    # the motion and its six forward differences, evaluated as one batch
-    X = np.r_[w, t] + np.concatenate([np.zeros((1, 6)), step * np.eye(6)])
-    An, Av = _design(rows, X[:, :3], X[:, 3:])
-    if marginal:
-        r = _evaluate(An, Av, n0, sigma2, n0)[0].reshape(7, -1)
-    else:
-        r = np.sqrt(_evaluate(An, Av, n0, None)[0])
-    J = np.ascontiguousarray(((r[1:] - r[0]) / step).T)
-    info = J.T @ J
+    sigma = sigma2 if marginal else None
+    _, n0 = _costs2(rows, obs.m_first[idx], w, t, sigma)
+    # the Gauss-Newton information with the line directions marginalised (or fitted) and the
+    # moments held, analytic (:func:`.jacobian.normal_equations`), in units of sigma2
+    info = normal_equations(rows, w[None], t[None], n0[None], orthonormal_pair(n0)[None],
+                            sigma)[0][0]
     scale = 1.0
     if marginal:
         # the data term alone: the fitted-direction costs (px^2, two unknowns per line); the

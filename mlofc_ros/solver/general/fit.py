@@ -24,7 +24,8 @@ from typing import NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from .model import _costs2, _design, _evaluate, LineObservations
+from .jacobian import normal_equations
+from .model import _costs2, LineObservations
 from ..lines import orthonormal_pair
 from ..models import chi2_quantile
 
@@ -129,10 +130,6 @@ def rescale_translation(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t
     return cands[int(np.argmin(costs))]
 
 
-#: Step of the Jacobian's central differences, per parameter (rad per frame; T's units).
-_STEP = 1e-6
-
-
 class _Tracks(NamedTuple):
     """One body's tracks and cost, as every LM run on them evaluates them."""
 
@@ -164,9 +161,8 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
     Run :func:`fit_body` independently from each of ``(W0, T0) (S, 3)`` on the same tracks.
 
     Returns ``W (S, 3)``, ``T (S, 3)`` and costs ``(S,)``. The runs advance in lockstep so that
-    every numpy call serves all of them (and, for the Jacobian, its 2 x 5 or 2 x 6 central
-    differences too): each call is dominated by its fixed overhead at these sizes (tens of
-    tracks), so one batched call costs little more than a single evaluation. Each run takes
+    every numpy call serves all of them: each call is dominated by its fixed overhead at these
+    sizes (tens of tracks), so one batched call costs little more than a single evaluation. Each run takes
     exactly the steps it takes alone: the batched operations repeat its products per motion.
 
     ``robust`` (px^2, a noise variance): minimise the robust cost of :func:`_robust_costs` at
@@ -211,38 +207,19 @@ def _normal_equations(tracks: _Tracks, W: np.ndarray, T: np.ndarray, n0: np.ndar
     Return the Gauss-Newton system ``(J^T J, J^T r)`` of each run at ``W, T (A, 3)``.
 
     ``n0 (A, L, 3)``: the runs' moments, held fixed (variable projection), ``basis`` their
-    :func:`.orthonormal_pair`; ``bases``: each run's basis of the T parameters. The Jacobian
-    is taken by central differences, every run's probes evaluated in one batch.
+    :func:`.orthonormal_pair`; ``bases``: each run's basis of the T parameters. Analytic
+    derivatives, every run in one batch (:func:`.jacobian.normal_equations`).
     """
-    n_par = 6 if tracks.free else 5
-    # parameter offsets of the Jacobian (+-h per parameter) and the residual itself (row 0).
-    # Forward differences would halve the probes (a warm frame ~15% faster), but moved three
-    # runs into wrong basins that central ones avoid (measured on bench spinning)
-    probe = np.zeros((1 + 2 * n_par, n_par))
-    probe[1::2, :][np.arange(n_par), np.arange(n_par)] = _STEP
-    probe[2::2, :][np.arange(n_par), np.arange(n_par)] = -_STEP
-    Wp = W[:, None, :] + probe[:, :3]                              # (A, Q, 3)
+    H, g = normal_equations(tracks.rows, W, T, n0, basis, tracks.sigma2, tracks.scale)
     if tracks.free:
-        # t + x @ I is exactly t + x: at most one non-zero product per element
-        Tp = T[:, None, :] + probe[:, 3:]
-    else:
-        Tp = np.stack([[_moved(T[a], x, bases[a], False) for x in probe]
-                       for a in range(W.shape[0])])                # runs x probes, not lines
-    An, Av = _design(tracks.rows, Wp, Tp)
-    r = _evaluate(An, Av, n0[:, None], tracks.sigma2, n0[:, None], basis[:, None])[0]
-    if tracks.scale is not None:
-        # IRLS: each line's residual rows (not the log-determinant) weighted by the root of
-        # its Cauchy weight at the current motion, the same for every probe
-        nq = r.shape[-1] - (1 if tracks.free else 0)
-        q = np.sum(r[:, 0, :, :nq] ** 2, axis=-1)                    # (A, L)
-        r = r.copy()
-        r[..., :nq] *= np.sqrt(tracks.scale / (tracks.scale + q))[:, None, :, None]
-    r = r.reshape(W.shape[0], probe.shape[0], -1)
+        return list(zip(H, g))
     systems = []
     for a in range(W.shape[0]):                          # a few runs, not lines
-        # C order, as the column-by-column fill was: J^T J runs the same BLAS kernel
-        J = np.ascontiguousarray(((r[a, 1::2] - r[a, 2::2]) / (2.0 * _STEP)).T)
-        systems.append((J.T @ J, J.T @ r[a, 0]))
+        # T moves in its tangent plane: x[3:] @ bases[a]
+        P = np.zeros((6, 5))
+        P[:3, :3] = np.eye(3)
+        P[3:, 3:] = bases[a].T
+        systems.append((P.T @ H[a] @ P, P.T @ g[a]))
     return systems
 
 
@@ -296,9 +273,9 @@ def fit_body(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, t0: np.ndar
     """
     Fit ``(w, T)`` to the tracks ``idx`` by Levenberg-Marquardt; return w, T, cost.
 
-    Variable projection: the per-line unknowns are eliminated, the Jacobian is taken of every
-    line's projected residual vector (central differences, moments held fixed, all evaluated
-    in one batch: :func:`_lm_runs`). With ``sigma2`` None (fitted line directions,
+    Variable projection: the per-line unknowns are eliminated; the Gauss-Newton system is the
+    joint one in the motion and the line directions, reduced to the motion, with the moments
+    held (analytic derivatives, :mod:`.jacobian`; every run in one batch: :func:`_lm_runs`). With ``sigma2`` None (fitted line directions,
     :func:`line_residuals`) T is a unit vector that moves in its tangent plane (five
     parameters, no gauge freedom); with ``sigma2`` (px^2, marginalised directions,
     :func:`marginal_residuals`) T is free (six parameters, its length is the body's
