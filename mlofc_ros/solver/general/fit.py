@@ -25,7 +25,7 @@ from typing import NamedTuple, Optional, Tuple
 import numpy as np
 
 from .jacobian import normal_equations
-from .model import _costs2, LineObservations
+from .model import _costs2, _row_products, LineObservations
 from ..lines import orthonormal_pair
 from ..models import chi2_quantile
 
@@ -71,12 +71,14 @@ def _robust_costs(res: np.ndarray, logdet: Optional[np.ndarray], scale: np.ndarr
 
 def _totals(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
             sigma2: Optional[float], scale: Optional[np.ndarray],
-            basis: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+            basis: Optional[np.ndarray] = None, products: Optional[np.ndarray] = None
+            ) -> Tuple[np.ndarray, np.ndarray]:
     """Return :func:`_costs2` with the line costs made robust when ``scale`` is given."""
     if scale is None:
-        return _costs2(rows, base, w, t, sigma2, basis)
+        return _costs2(rows, base, w, t, sigma2, basis, products=products)
     parts: list = []
-    res, n0 = _costs2(rows, base, w, t, sigma2, basis, parts if sigma2 is not None else None)
+    res, n0 = _costs2(rows, base, w, t, sigma2, basis, parts if sigma2 is not None else None,
+                      products)
     return _robust_costs(res, parts[0] if parts else None, scale), n0
 
 
@@ -103,9 +105,11 @@ def _scan_costs(rows: np.ndarray, base: np.ndarray, w: np.ndarray, T: np.ndarray
     """
     size = max(1, _BATCH // max(rows.shape[0] * rows.shape[1], 1))
     w = np.broadcast_to(w, T.shape)
+    products = None if sigma2 is None else _row_products(rows)
     out: list = []
     for s in range(0, T.shape[0], size):                 # chunks of many candidates
-        res, _ = _totals(rows, base, w[s:s + size], T[s:s + size], sigma2, scale)
+        res, _ = _totals(rows, base, w[s:s + size], T[s:s + size], sigma2, scale,
+                         products=products)
         out += [r.sum() for r in res]                    # per candidate: a sum as in a loop
     return out
 
@@ -134,6 +138,7 @@ class _Tracks(NamedTuple):
     """One body's tracks and cost, as every LM run on them evaluates them."""
 
     rows: np.ndarray                 # (L, K, 2, 3) observation rows, gathered once
+    products: Optional[np.ndarray]   # (9K, L) their row products (marginalised costs)
     sigma2: Optional[float]          # None: fitted line directions; else marginalised (px^2)
     scale: Optional[np.ndarray]      # (L,) robust cost's scale; None: least squares
 
@@ -162,8 +167,9 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
 
     Returns ``W (S, 3)``, ``T (S, 3)`` and costs ``(S,)``. The runs advance in lockstep so that
     every numpy call serves all of them: each call is dominated by its fixed overhead at these
-    sizes (tens of tracks), so one batched call costs little more than a single evaluation. Each run takes
-    exactly the steps it takes alone: the batched operations repeat its products per motion.
+    sizes (tens of tracks), so one batched call costs little more than a single evaluation.
+    Each run takes exactly the steps it takes alone: the batched operations repeat its
+    products per motion.
 
     ``robust`` (px^2, a noise variance): minimise the robust cost of :func:`_robust_costs` at
     :func:`robust_scale` of that variance instead of the sum of squares, by iteratively
@@ -172,14 +178,16 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
     which is also the cost returned.
     """
     scale = None if robust is None else robust_scale(obs.frames[idx], robust)
-    tracks = _Tracks(obs.rows[idx], sigma2, scale)
+    rows = obs.rows[idx]
+    tracks = _Tracks(rows, None if sigma2 is None else _row_products(rows), sigma2, scale)
     W = np.array(W0, dtype=float)
     T = np.array(T0, dtype=float)
     if not tracks.free:
         for s in range(W.shape[0]):                      # a few runs, not lines
             nt = np.linalg.norm(T[s])
             T[s] = T[s] / nt if nt > 1e-12 else np.array([0.0, 0.0, 1.0])
-    res, n0 = _totals(tracks.rows, obs.m_first[idx], W, T, sigma2, scale)
+    res, n0 = _totals(tracks.rows, obs.m_first[idx], W, T, sigma2, scale,
+                      products=tracks.products)
     runs = _Runs(W, T, n0, [float(r.sum()) for r in res], [1e-3] * W.shape[0])
     active = np.arange(W.shape[0])                       # runs still iterating
     for _ in range(iterations):
@@ -251,7 +259,7 @@ def _line_search(tracks: _Tracks, runs: _Runs, active: np.ndarray, systems: list
         cw = np.array([runs.W[active[a]] + step[:3] for a, step, _ in cand])
         ct = np.array([_moved(T[a], step, bases[a], tracks.free) for a, step, _ in cand])
         rn, n0n = _totals(tracks.rows, n0[pos], cw, ct, tracks.sigma2, tracks.scale,
-                          basis[pos])
+                          basis[pos], tracks.products)
         for i, (a, step, lam_a) in enumerate(cand):      # each run's tries in order
             s = active[a]
             if a in accepted:
@@ -275,7 +283,8 @@ def fit_body(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, t0: np.ndar
 
     Variable projection: the per-line unknowns are eliminated; the Gauss-Newton system is the
     joint one in the motion and the line directions, reduced to the motion, with the moments
-    held (analytic derivatives, :mod:`.jacobian`; every run in one batch: :func:`_lm_runs`). With ``sigma2`` None (fitted line directions,
+    held (analytic derivatives, :mod:`.jacobian`; every run in one batch: :func:`_lm_runs`).
+    With ``sigma2`` None (fitted line directions,
     :func:`line_residuals`) T is a unit vector that moves in its tangent plane (five
     parameters, no gauge freedom); with ``sigma2`` (px^2, marginalised directions,
     :func:`marginal_residuals`) T is free (six parameters, its length is the body's

@@ -38,7 +38,7 @@ import numpy as np
 
 from .eigen import smallest_eigenpair, smallest_eigenpair_parts
 from ..lines import (first_midpoints, interpretation_normals, normalise_points, orthonormal_pair,
-                     rotation_matrix)
+                     rotation_matrix, skew)
 
 
 Intrinsics = Tuple[float, float, float, float]
@@ -199,18 +199,37 @@ def _line_eval(An: np.ndarray, AvB: np.ndarray, base: np.ndarray,
 Grams = dict
 
 
-def _grams(An: np.ndarray, Av: np.ndarray) -> Grams:
+def _row_products(rows: np.ndarray) -> np.ndarray:
     """
-    Return the :data:`Grams` of :func:`_design`'s output ``(..., L, 2K, 3)``.
+    Return ``sum_r e e^T`` of each track's two observation rows per frame, ``(9 K, L)``.
 
-    They hold all that the marginalised cost needs of the ``2K x 3`` constraints, whatever the
-    basis of ``v0``: two passes at the same motion (:func:`_costs2`) share them.
+    ``rows (L, K, 2, 3)``; laid out frame, row index, column index first, tracks last: the
+    motion-independent part of every :func:`_grams`.
     """
-    AnT, AvT = np.swapaxes(An, -1, -2), np.swapaxes(Av, -1, -2)
-    out = {}
-    for key, g in (('nn', AnT @ An), ('vn', AvT @ An), ('vv', AvT @ Av)):
-        out[key] = [[g[..., i, j] for j in range(3)] for i in range(3)]
-    return out
+    P = np.einsum('lkri,lkrj->kijl', rows, rows)
+    return np.ascontiguousarray(P.reshape(-1, rows.shape[0]))
+
+
+def _grams(products: np.ndarray, w: np.ndarray, t: np.ndarray, n_frames: int) -> Grams:
+    """
+    Return the :data:`Grams` of the constraints (:func:`_design`) at motions ``w, t (..., 3)``.
+
+    ``products (9 K, L)``: :func:`_row_products`. A constraint row is ``e^T R^k`` on the moment
+    and ``e^T [T_k]_x R^k`` on the direction, so each Gram block is
+    ``sum_k X_k^T (sum_r e e^T) Y_k``: linear in the row products, with weights from the
+    motion alone, one matrix product per motion instead of ``2K x 3`` constraints per line.
+    They hold all that the marginalised cost needs, whatever the basis of ``v0``: two passes
+    at the same motion (:func:`_costs2`) share them.
+    """
+    Rk, Tk = _motion_terms(w, t, n_frames)                           # (..., K, 3, 3)
+    Q = skew(Tk) @ Rk
+    lead = Rk.shape[:-3]
+    weights = np.concatenate(
+        [np.einsum('...kai,...kbj->...ijkab', x, y).reshape(lead + (9, 9 * n_frames))
+         for x, y in ((Rk, Rk), (Q, Rk), (Q, Q))], axis=-2)          # (..., 27, 9K)
+    g = weights @ products                                           # (..., 27, L)
+    return {key: [[g[..., 9 * n + 3 * i + j, :] for j in range(3)] for i in range(3)]
+            for n, key in enumerate(('nn', 'vn', 'vv'))}
 
 
 def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: float,
@@ -299,11 +318,10 @@ def _evaluate(An: np.ndarray, Av: np.ndarray, base: np.ndarray, sigma2: Optional
     """
     Return costs and moments (or residual vectors at ``fixed``) from :func:`_design`'s output.
 
-    ``sigma2`` None: :func:`line_residuals`, else :func:`marginal_residuals`; every array may
-    carry leading batch axes.
+    ``sigma2`` None: :func:`line_residuals`; else the residual vectors of
+    :func:`marginal_residuals` at ``fixed`` (its costs come from :func:`_grams`); every array
+    may carry leading batch axes.
     """
-    if sigma2 is not None and fixed is None:
-        return _marginal_costs(_grams(An, Av), base, sigma2, basis, logdet_out)
     M = _direction_columns(Av, base, basis)
     if sigma2 is None:
         return _line_eval(An, M, base, fixed)
@@ -354,26 +372,32 @@ def marginal_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t:
     cost).
     """
     base = obs.m_first[idx] if n0 is None else n0
+    if fixed is None:
+        rows = obs.rows[idx]
+        grams = _grams(_row_products(rows), w, t, rows.shape[1])
+        return _marginal_costs(grams, base, sigma2, logdet_out=logdet_out)
     An, Av = _design(obs.rows[idx], w, t)
     return _evaluate(An, Av, base, sigma2, fixed, logdet_out=logdet_out)
 
 
 def _costs2(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
             sigma2: Optional[float], basis: Optional[np.ndarray] = None,
-            logdet_out: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray]:
+            logdet_out: Optional[list] = None, products: Optional[np.ndarray] = None
+            ) -> Tuple[np.ndarray, np.ndarray]:
     """
     Return costs ``(..., L)`` and moments after two passes (the v0 plane follows the moment).
 
     ``rows (L, K, 2, 3)``: the tracks' observation rows; ``w, t (..., 3)`` one motion or a
     batch; ``base (L, 3)`` or ``(..., L, 3)`` the first pass's moments, ``basis`` their
     :func:`.orthonormal_pair` if known. Both passes share the motion's constraints.
-    ``logdet_out``: a list that receives the second pass's log-determinant terms (marginalised).
+    ``logdet_out``: a list that receives the second pass's log-determinant terms (marginalised);
+    ``products``: :func:`_row_products` of ``rows`` if already computed.
     """
     if sigma2 is None:
         An, Av = _design(rows, w, t)
         _, n0 = _evaluate(An, Av, base, None, basis=basis)
         return _evaluate(An, Av, n0, None)
-    grams = _grams(*_design(rows, w, t))
+    grams = _grams(_row_products(rows) if products is None else products, w, t, rows.shape[1])
     _, n0 = _marginal_costs(grams, base, sigma2, basis)
     return _marginal_costs(grams, n0, sigma2, logdet_out=logdet_out)
 
@@ -400,9 +424,8 @@ def marginal_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray, sigma2: 
 
     See :func:`marginal_residuals`; ``nan`` for tracks with fewer than 3 frames.
     """
-    An, Av = _design(obs.rows, W, T)                     # all bodies in one batch
-    _, n0 = _evaluate(An, Av, obs.m_first, sigma2)
     parts: list = []
-    out = np.ascontiguousarray(_evaluate(An, Av, n0, sigma2, logdet_out=parts)[0].T)
+    out = np.ascontiguousarray(_costs2(obs.rows, obs.m_first, W, T, sigma2,         # all bodies
+                                       logdet_out=parts)[0].T)                     # in a batch
     out[obs.frames < 3] = np.nan
     return out, np.ascontiguousarray(parts[0].T)
