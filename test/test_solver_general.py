@@ -14,8 +14,9 @@
 """The general (rotation + translation) line model of ``method='general'``."""
 from mlofc_ros.solver import segment_lines
 from mlofc_ros.solver.general import (body_covariance, fit_body, fit_body_multistart,
-                                      general_warm, line_residuals, LineObservations,
-                                      marginal_residuals, marginal_segmentation, necker_mirror,
+                                      general_costs, general_warm, line_residuals,
+                                      LineObservations, marginal_residuals,
+                                      marginal_segmentation, necker_mirror,
                                       PIVOT_KEEP, pivot_picks, PIVOT_RATES, PIVOT_W,
                                       polish_body, position_costs)
 from mlofc_ros.solver.general.eigen import smallest_eigenpair
@@ -408,6 +409,12 @@ def test_a_body_fitted_worse_than_the_measured_noise_gets_a_wider_covariance():
     # noise underestimated 9x: widened by the body's reduced chi-square, not shrunk 9x
     assert 0.5 < trace(noise ** 2 / 9) / at_noise < 2.0
     assert trace(4 * noise ** 2) / at_noise > 2.0                # overestimated: not shrunk
+    # the fitted-direction costs a step already has (general_costs) give the same covariance
+    fitted = general_costs(obs, w_fit[None], t_fit[None])[:, 0]
+    assert np.allclose(body_covariance(obs, idx, w_fit, t_fit, noise ** 2, marginal=True,
+                                       fitted=fitted),
+                       body_covariance(obs, idx, w_fit, t_fit, noise ** 2, marginal=True),
+                       rtol=1e-9)
 
 
 def test_closed_form_smallest_eigenpair_matches_lapack_also_when_eigenvalues_meet():

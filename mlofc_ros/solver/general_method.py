@@ -237,7 +237,8 @@ def _step(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarra
         W[b], T[b], _ = fit_body(obs, idx, W[b], T[b], STEP_ITERATIONS, fine, fine)
         if rescan is not None and rescan[b]:
             W[b], T[b] = _rescanned(obs, idx, W[b], T[b], sigma2)
-    sigma2 = measured_noise(obs, W, T)
+    fitted: list = []
+    sigma2 = measured_noise(obs, W, T, fitted)
     # the labels at the segmentation's inflated noise level, where T's scale matters: the
     # stepped T rescaled there (W held: the state stays the published motion)
     T_labels = T.copy()
@@ -254,7 +255,7 @@ def _step(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarra
         return None
     sol = {'labels': labels, 'W': W, 'T': T, 'costs': costs, 'sigma2': NOISE_FACTOR * sigma2,
            'start': 'step', 'score': total_cost(total, labels, cap)}
-    return _result(obs, rot, sol, sigma2, 0)
+    return _result(obs, rot, sol, sigma2, 0, fitted[0])
 
 
 def _rescanned(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
@@ -313,10 +314,15 @@ def _refit_bodies(obs: LineObservations, sol: dict, sigma2: float, rescan: np.nd
 
 
 def _result(obs: LineObservations, rot: SegmentationResult, sol: dict, sigma2: float,
-            iterations: int = POLISH_ITERATIONS) -> SegmentationResult:
-    """Make the method's result: published motions and covariances, residuals, diagnostics."""
+            iterations: int = POLISH_ITERATIONS, fitted: Optional[np.ndarray] = None
+            ) -> SegmentationResult:
+    """
+    Make the method's result: published motions and covariances, residuals, diagnostics.
+
+    ``fitted (N, n)``: the fitted-direction costs at the motions of ``sol`` if known.
+    """
     labels = sol['labels']
-    W_pub, cov = _published(obs, labels, sol['W'], sol['T'], sigma2, iterations)
+    W_pub, cov = _published(obs, labels, sol['W'], sol['T'], sigma2, iterations, fitted)
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
     scale = np.linalg.norm(sol['T'], axis=1)
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -334,19 +340,24 @@ def _result(obs: LineObservations, rot: SegmentationResult, sol: dict, sigma2: f
 
 
 def _published(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
-               sigma2: float, iterations: int) -> Tuple[np.ndarray, np.ndarray]:
+               sigma2: float, iterations: int, fitted: Optional[np.ndarray] = None
+               ) -> Tuple[np.ndarray, np.ndarray]:
     """
     Return the published rotation vectors ``(n, 3)`` and their covariances ``(n, 3, 3)``.
 
     Each body's refit (:func:`published_motions`); a body whose refit has no finite covariance
     publishes the segmentation's motion ``W`` (nor would it decide, through the pipeline's
-    validity, which bodies are tracked).
+    validity, which bodies are tracked). ``fitted (N, n)``: the fitted-direction costs at
+    ``(W, T)`` if known (used for the bodies that are not refit).
     """
     W_pub, T_pub = published_motions(obs, labels, W, T, sigma2, iterations)
     cov = np.empty((W.shape[0], 3, 3))
     for b in range(W.shape[0]):                           # bodies, not lines
         idx = np.flatnonzero(labels == b)
-        cov[b] = body_covariance(obs, idx, W_pub[b], T_pub[b], sigma2, marginal=True)
+        same = np.array_equal(W_pub[b], W[b]) and np.array_equal(T_pub[b], T[b])
+        known = fitted[idx, b] if fitted is not None and same else None
+        cov[b] = body_covariance(obs, idx, W_pub[b], T_pub[b], sigma2, marginal=True,
+                                 fitted=known)
         if not np.all(np.isfinite(cov[b])) and not np.array_equal(W_pub[b], W[b]):
             W_pub[b], T_pub[b] = W[b], T[b]
             cov[b] = body_covariance(obs, idx, W_pub[b], T_pub[b], sigma2, marginal=True)

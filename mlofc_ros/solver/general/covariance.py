@@ -23,6 +23,8 @@ camera-centre rotation (the model holds) 5.8 -> 2.5 with 92% of the frames withi
 bound. A box fitted in a wrong basin stays far outside (NEES 34 to 5100): that is a second
 minimum, not a wider one.
 """
+from typing import Optional
+
 import numpy as np
 
 from .jacobian import normal_equations
@@ -31,14 +33,16 @@ from ..lines import orthonormal_pair
 
 
 def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
-                    sigma2: float, marginal: bool = False) -> np.ndarray:
+                    sigma2: float, marginal: bool = False,
+                    fitted: Optional[np.ndarray] = None) -> np.ndarray:
     """
     Return the covariance ``(3, 3)`` of a body's rotation vector from the Gauss-Newton information.
 
     ``sigma2``: noise variance (px^2). ``marginal``: the body was fitted with
     :func:`.marginal_residuals` at that ``sigma2`` (``t`` with its scale); the covariance is
     then also scaled by the body's reduced chi-square (its fitted-direction costs over
-    ``sigma2``) when above 1.
+    ``sigma2``) when above 1; ``fitted (L,)``: those costs of the tracks ``idx`` at ``(w, t)``
+    if already known (:func:`.general_costs`; NaN: fewer than 3 frames, no constraint).
     """
     if idx.size < 3:
         return np.full((3, 3), np.inf)
@@ -53,9 +57,10 @@ def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np
     if marginal:
         # the data term alone: the fitted-direction costs (px^2, two unknowns per line); the
         # marginal residuals also hold the direction prior, which does not scale with sigma2
-        fitted, _ = _costs2(rows, obs.m_first[idx], w, t, None)
+        if fitted is None:
+            fitted, _ = _costs2(rows, obs.m_first[idx], w, t, None)
         dof = float(np.sum(2.0 * obs.frames[idx] - 4.0)) - 6.0
-        total = float(np.sum(fitted))
+        total = float(np.sum(np.nan_to_num(fitted, nan=0.0)))
         if dof > 0 and np.isfinite(total):
             scale = max(total / dof / sigma2, 1.0)
     try:

@@ -67,15 +67,20 @@ def _robust_sigma2(best: np.ndarray, dof: np.ndarray) -> float:
     return float(max(np.median(best[ok] / chi2_quantile(0.5, dof[ok])), SIGMA_FLOOR_PX ** 2))
 
 
-def measured_noise(obs: LineObservations, W: np.ndarray, T: np.ndarray) -> float:
+def measured_noise(obs: LineObservations, W: np.ndarray, T: np.ndarray,
+                   costs_out: Optional[list] = None) -> float:
     """
     Return the endpoint noise variance (px^2) of the tracks at the motions ``(W, T) (n, 3)``.
 
     The median over the tracks of each one's cheapest fitted-direction cost
     (:func:`.general_costs`), normalised by its chi-square median (2K - 4 dof).
+    ``costs_out``: a list that receives those costs ``(N, n)``.
     """
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
-    return _robust_sigma2(_best_costs(general_costs(obs, W, T)), dof)
+    costs = general_costs(obs, W, T)
+    if costs_out is not None:
+        costs_out.append(costs)
+    return _robust_sigma2(_best_costs(costs), dof)
 
 
 def assign_fitted(obs: LineObservations, W: np.ndarray, T: np.ndarray,
