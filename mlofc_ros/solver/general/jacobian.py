@@ -145,12 +145,14 @@ def normal_equations(rows: np.ndarray, W: np.ndarray, T: np.ndarray, n0: np.ndar
     S = MT @ M
     s00, s01, s11 = S[..., 0, 0] + reg, S[..., 0, 1], S[..., 1, 1] + reg
     if sigma2 is None:
-        # fitted directions: a line whose direction columns vanish keeps no direction
-        tiny = 1e-12 * np.maximum(s00 + s11, 1e-300)
+        # fitted directions: nearly parallel direction columns keep a finite inverse
+        tiny = 1e-12 * (s00 + s11)
         s00, s11 = s00 + tiny, s11 + tiny
     det = s00 * s11 - s01 * s01
-    Sinv = np.stack([np.stack([s11, -s01], -1), np.stack([-s01, s00], -1)], -2) / det[
-        ..., None, None]                                                  # (A, L, 2, 2)
+    # a line without direction columns (seen in the first frame only, fitted directions) has
+    # no direction to eliminate: its inverse is taken as zero
+    Sinv = np.stack([np.stack([s11, -s01], -1), np.stack([-s01, s00], -1)], -2) / np.where(
+        det > 0.0, det, np.inf)[..., None, None]                          # (A, L, 2, 2)
     u = -(Sinv @ (MT @ r0[..., None]))[..., 0]                            # (A, L, 2)
     rho = r0 + (M @ u[..., None])[..., 0]                                 # (A, L, 2K)
     v0 = (basis @ u[..., None])[..., 0]                                   # (A, L, 3)
