@@ -425,7 +425,8 @@ def marginal_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray, sigma2: 
     See :func:`marginal_residuals`; ``nan`` for tracks with fewer than 3 frames.
     """
     parts: list = []
-    out = np.ascontiguousarray(_costs2(obs.rows, obs.m_first, W, T, sigma2,         # all bodies
-                                       logdet_out=parts)[0].T)                     # in a batch
+    # all bodies in one batch
+    out = np.ascontiguousarray(_costs2(obs.rows, obs.m_first, W, T, sigma2,
+                                       logdet_out=parts)[0].T)
     out[obs.frames < 3] = np.nan
     return out, np.ascontiguousarray(parts[0].T)
