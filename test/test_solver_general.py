@@ -327,25 +327,27 @@ def test_a_failed_refit_publishes_the_segmentation_motion(monkeypatch):
     obs = LineObservations(tracks, (F, F, C, C))
     W, T = res.segmentation_angular_velocities, np.array([[0.0, 0.0, 0.1]])
     with monkeypatch.context() as m:
-        m.setattr(general_method, 'polish_body', lambda obs, idx, w, t, *a: (w * np.nan, t, 0.0))
+        m.setattr(general_method, 'polish_bodies',
+                  lambda obs, members, W, T, *a: (W * np.nan, T, np.zeros(len(W))))
         W_pub, T_pub = general_method.published_motions(obs, res.labels, W, T, 0.01)
     assert np.array_equal(W_pub, W) and np.array_equal(T_pub, T)
     # ... and one without a covariance (then the covariance at the segmentation's motion)
-    real = general_method.body_covariance
+    real = general_method.body_covariances
     calls, returned = [], []
 
     def first_without(*args, **kwargs):
-        calls.append(np.array(args[2]))                 # a copy: the row is reused
-        returned.append(np.full((3, 3), np.nan) if len(calls) == 1 else real(*args, **kwargs))
+        calls.append(np.array(args[2][0]))              # a copy: the row is reused
+        returned.append(np.full((1, 3, 3), np.nan) if len(calls) == 1
+                        else real(*args, **kwargs))
         return returned[-1]
     with monkeypatch.context() as m:
-        m.setattr(general_method, 'body_covariance', first_without)
+        m.setattr(general_method, 'body_covariances', first_without)
         failed = segment_lines(tracks, 1, intrinsics=(F, F, C, C), method='general')
     assert len(calls) == 2
     assert np.array_equal(calls[0], res.angular_velocities[0])       # the refit's
     assert np.array_equal(calls[1], res.segmentation_angular_velocities[0])
     assert np.array_equal(failed.angular_velocities, res.segmentation_angular_velocities)
-    assert np.array_equal(failed.angular_covariances[0], returned[1])
+    assert np.array_equal(failed.angular_covariances[0], returned[1][0])
     assert np.all(np.isfinite(failed.angular_covariances))
 
 
@@ -568,3 +570,48 @@ def test_rescale_translation_finds_the_scale_of_a_translation_at_the_segmentatio
         t = rescale_translation(obs, idx, W[0], T[0] * wrong, 1.0)
         assert np.allclose(t / np.linalg.norm(t), T[0] / np.linalg.norm(T[0]))
         assert 0.5 < np.linalg.norm(t) / np.linalg.norm(T[0]) < 2.0
+
+
+def test_bodies_fitted_together_match_each_body_fitted_alone():
+    # the step fits, rescales and publishes every body in one batch, each on its own tracks
+    # padded to the longest: padding must not count, and each body gets what it gets alone
+    from mlofc_ros.solver.general import (body_covariances, fit_bodies, fit_bodies_multistart,
+                                          polish_bodies, rescale_translation,
+                                          rescale_translations)
+    tracks, truth, _, (W, T) = _two_spinning_bodies()
+    obs = LineObservations(tracks[:, :10], (F, F, C, C))
+    members = [np.flatnonzero(truth == 0)[:13], np.flatnonzero(truth == 1)]
+    W0, T0 = W * 1.03, T * 1.5
+    for sigma2, robust in ((0.5, 0.5), (0.5, None), (None, None)):
+        T_start = T0 if sigma2 else T0 / np.linalg.norm(T0, axis=1, keepdims=True)
+        Wb, Tb, costs = fit_bodies(obs, members, W0, T_start, 4, sigma2, robust)
+        for b, idx in enumerate(members):
+            w, t, c = fit_body(obs, idx, W0[b], T_start[b], 4, sigma2, robust)
+            assert np.allclose(Wb[b], w, rtol=0, atol=1e-9)
+            assert np.allclose(Tb[b], t, rtol=1e-6, atol=1e-9)
+            assert np.isclose(costs[b], c, rtol=1e-9)
+    wrong = np.array([[8.0], [1 / 8.0]])
+    scaled = rescale_translations(obs, members, W, T * wrong, 1.0)
+    for b, idx in enumerate(members):
+        assert np.array_equal(scaled[b], rescale_translation(obs, idx, W[b], T[b] * wrong[b],
+                                                             1.0))
+        assert 0.5 < np.linalg.norm(scaled[b]) / np.linalg.norm(T[b]) < 2.0
+    # multi-start searches and polishing refits, every body's runs and mirrors in one batch
+    multi = fit_bodies_multistart(obs, members, W, T * 2.0, 6, 2, 0.5, robust=0.5,
+                                  per_rate=True)
+    polished = polish_bodies(obs, members, W0, T0, 6, 0.5, 0.5)
+    for b, idx in enumerate(members):
+        alone = fit_body_multistart(obs, idx, W[b], T[b] * 2.0, 6, 2, 0.5, obs.body_ray(idx),
+                                    robust=0.5, per_rate=True)
+        assert np.allclose(multi[0][b], alone[0], rtol=0, atol=1e-9)
+        assert np.isclose(multi[2][b], alone[2], rtol=1e-9)
+        assert np.allclose(polished[0][b], polish_body(obs, idx, W0[b], T0[b], 6, 0.5, 0.5)[0],
+                           rtol=0, atol=1e-9)
+        w, t, c = fit_body(obs, idx, W0[b], T0[b], 6, 0.5, 0.5)
+        assert polished[2][b] <= c * (1 + 1e-12)     # the best of its runs, the first one's
+    few = [members[0], members[1], members[1][:2]]       # a body of 2 tracks: no covariance
+    cov = body_covariances(obs, few, np.r_[W, W[:1]], np.r_[T, T[:1]], 0.5, marginal=True)
+    for b in range(2):
+        alone = body_covariance(obs, members[b], W[b], T[b], 0.5, marginal=True)
+        assert np.allclose(cov[b], alone, rtol=1e-7, atol=0)
+    assert np.all(np.isinf(cov[2]))

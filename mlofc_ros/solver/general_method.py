@@ -19,7 +19,7 @@ length when it is unknown and a start; the bodies are then either stepped from t
 window's motions (``step``: a few LM steps each, one assignment, :func:`_step`, which returns
 at once), tracked from its labels and motions (:func:`.general_warm`, then the marginalised
 segmentation) or found by the multi-start search (:func:`.general_search`). After these two,
-every body is refit at the measured noise with the robust line cost (:func:`.polish_body`;
+every body is refit at the measured noise with the robust line cost (:func:`.polish_bodies`;
 tracked bodies marked for a rescan are also refit from the pivot starts), and the published
 rotation is a further refit at a fraction of that noise (:data:`PUBLISH_NOISE_SCALE`).
 """
@@ -29,10 +29,11 @@ from typing import Mapping, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from .general import (assign_bodies, assign_fitted, body_covariance, fit_body,
-                      fit_body_multistart, general_search, general_warm, LineObservations,
-                      marginal_segmentation, measured_noise, NOISE_FACTOR, polish_body,
-                      rescale_translation, spatial_labels, WARM_INLIERS)
+from .general import (assign_bodies, assign_fitted, body_covariances, fit_bodies,
+                      fit_bodies_multistart, fit_body, fit_body_multistart, general_search,
+                      general_warm, LineObservations, marginal_segmentation, measured_noise,
+                      NOISE_FACTOR, polish_bodies, rescale_translations, spatial_labels,
+                      WARM_INLIERS)
 from .ksubspaces import total_cost
 from .problem import Problem
 from .result import SegmentationResult
@@ -231,19 +232,22 @@ def _step(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarra
     start = np.where(prev >= 0, prev, assigned)
     fine = sigma2 * PUBLISH_NOISE_SCALE
     W, T = np.array(w0, dtype=float), np.array(t0, dtype=float)
-    members = {b: np.flatnonzero(start == b) for b in range(n)}     # bodies, not lines
-    members = {b: idx for b, idx in members.items() if idx.size >= 3}
-    for b, idx in members.items():
-        W[b], T[b], _ = fit_body(obs, idx, W[b], T[b], STEP_ITERATIONS, fine, fine)
+    members = [np.flatnonzero(start == b) for b in range(n)]       # bodies, not lines
+    moved = [b for b in range(n) if members[b].size >= 3]
+    if moved:                       # every body's LM steps in one lockstep batch
+        W[moved], T[moved], _ = fit_bodies(obs, [members[b] for b in moved], W[moved],
+                                           T[moved], STEP_ITERATIONS, fine, fine)
+    for b in moved:                                                  # bodies, not lines
         if rescan is not None and rescan[b]:
-            W[b], T[b] = _rescanned(obs, idx, W[b], T[b], sigma2)
+            W[b], T[b] = _rescanned(obs, members[b], W[b], T[b], sigma2)
     fitted: list = []
     sigma2 = measured_noise(obs, W, T, fitted)
     # the labels at the segmentation's inflated noise level, where T's scale matters: the
     # stepped T rescaled there (W held: the state stays the published motion)
     T_labels = T.copy()
-    for b, idx in members.items():
-        T_labels[b] = rescale_translation(obs, idx, W[b], T[b], NOISE_FACTOR * sigma2)
+    if moved:
+        T_labels[moved] = rescale_translations(obs, [members[b] for b in moved], W[moved],
+                                               T[moved], NOISE_FACTOR * sigma2)
     labels, costs, total, cap = assign_bodies(obs, W, T_labels, NOISE_FACTOR * sigma2, start,
                                               neighbours=neighbours, points=obs.midpoints,
                                               position_weight=WARM_POSITION_WEIGHT)
@@ -301,16 +305,21 @@ def _refit_bodies(obs: LineObservations, sol: dict, sigma2: float, rescan: np.nd
     cheaper fit (:data:`RESCAN_MARGIN`).
     """
     labels = sol['labels']
-    for b in range(sol['W'].shape[0]):                   # bodies, not lines
-        idx = np.flatnonzero(labels == b)
-        if idx.size < 3:
-            continue
-        fit = polish_body(obs, idx, sol['W'][b], sol['T'][b], POLISH_ITERATIONS, sigma2, sigma2)
-        if rescan[b]:
-            alt = fit_body_multistart(obs, idx, fit[0], fit[1], POLISH_ITERATIONS, 1, sigma2,
-                                      obs.body_ray(idx), robust=sigma2, per_rate=True)
-            fit = alt if alt[2] < (1.0 - RESCAN_MARGIN) * fit[2] else fit
-        sol['W'][b], sol['T'][b] = fit[0], fit[1]
+    members = [np.flatnonzero(labels == b) for b in range(sol['W'].shape[0])]
+    some = [b for b, idx in enumerate(members) if idx.size >= 3]    # bodies, not lines
+    if not some:
+        return
+    W, T, cost = polish_bodies(obs, [members[b] for b in some], sol['W'][some],
+                               sol['T'][some], POLISH_ITERATIONS, sigma2, sigma2)
+    again = [i for i, b in enumerate(some) if rescan[b]]
+    if again:
+        alt = fit_bodies_multistart(obs, [members[some[i]] for i in again], W[again],
+                                    T[again], POLISH_ITERATIONS, 1, sigma2, robust=sigma2,
+                                    per_rate=True)
+        take = alt[2] < (1.0 - RESCAN_MARGIN) * cost[again]
+        keep = np.asarray(again)[take]
+        W[keep], T[keep] = alt[0][take], alt[1][take]
+    sol['W'][some], sol['T'][some] = W, T
 
 
 def _result(obs: LineObservations, rot: SegmentationResult, sol: dict, sigma2: float,
@@ -351,16 +360,17 @@ def _published(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.n
     ``(W, T)`` if known (used for the bodies that are not refit).
     """
     W_pub, T_pub = published_motions(obs, labels, W, T, sigma2, iterations)
-    cov = np.empty((W.shape[0], 3, 3))
-    for b in range(W.shape[0]):                           # bodies, not lines
-        idx = np.flatnonzero(labels == b)
-        same = np.array_equal(W_pub[b], W[b]) and np.array_equal(T_pub[b], T[b])
-        known = fitted[idx, b] if fitted is not None and same else None
-        cov[b] = body_covariance(obs, idx, W_pub[b], T_pub[b], sigma2, marginal=True,
-                                 fitted=known)
-        if not np.all(np.isfinite(cov[b])) and not np.array_equal(W_pub[b], W[b]):
-            W_pub[b], T_pub[b] = W[b], T[b]
-            cov[b] = body_covariance(obs, idx, W_pub[b], T_pub[b], sigma2, marginal=True)
+    members = [np.flatnonzero(labels == b) for b in range(W.shape[0])]   # bodies, not lines
+    same = np.all(W_pub == W, axis=1) & np.all(T_pub == T, axis=1)
+    known = ([fitted[idx, b] for b, idx in enumerate(members)]
+             if fitted is not None and np.all(same) else None)
+    cov = body_covariances(obs, members, W_pub, T_pub, sigma2, marginal=True, fitted=known)
+    back = [b for b in range(W.shape[0])
+            if not np.all(np.isfinite(cov[b])) and not np.array_equal(W_pub[b], W[b])]
+    if back:
+        W_pub[back], T_pub[back] = W[back], T[back]
+        cov[back] = body_covariances(obs, [members[b] for b in back], W[back], T[back],
+                                     sigma2, marginal=True)
     return W_pub, cov
 
 
@@ -378,10 +388,13 @@ def published_motions(obs: LineObservations, labels: np.ndarray, W: np.ndarray,
     if PUBLISH_NOISE_SCALE is None or iterations == 0:
         return W_pub, T_pub
     s2 = sigma2 * PUBLISH_NOISE_SCALE
-    for b in range(W.shape[0]):                          # bodies, not lines
-        idx = np.flatnonzero(labels == b)
-        if idx.size >= 3:
-            w, t, _ = polish_body(obs, idx, W[b], T[b], iterations, s2, s2)
-            if np.all(np.isfinite(w)) and np.all(np.isfinite(t)):
-                W_pub[b], T_pub[b] = w, t
+    members = [np.flatnonzero(labels == b) for b in range(W.shape[0])]
+    some = [b for b, idx in enumerate(members) if idx.size >= 3]    # bodies, not lines
+    if not some:
+        return W_pub, T_pub
+    w, t, _ = polish_bodies(obs, [members[b] for b in some], W[some], T[some], iterations,
+                            s2, s2)
+    ok = np.all(np.isfinite(w), axis=1) & np.all(np.isfinite(t), axis=1)
+    done = np.asarray(some)[ok]
+    W_pub[done], T_pub[done] = w[ok], t[ok]
     return W_pub, T_pub

@@ -19,14 +19,16 @@ only). The package's modules, in the order they build on each other:
 
 - :mod:`.eigen`: closed-form smallest eigenpair of batches of 3x3 matrices;
 - :mod:`.model`: the line model, each line's unknowns projected out or marginalised;
-- :mod:`.fit`: Levenberg-Marquardt fit of one body's motion, several runs in lockstep;
+- :mod:`.fit`: Levenberg-Marquardt fit of a body's motion, several runs (and bodies) in
+  lockstep;
 - :mod:`.starts`: a body's starting motions (scans, pivot starts, Necker reversal);
 - :mod:`.search`: the segmentation, cold (:func:`general_search`) or warm
   (:func:`general_warm`);
 - :mod:`.covariance`: the published rotation's covariance.
 """
-from .covariance import body_covariance
-from .fit import fit_body, rescale_translation, RESCALES, ROBUST_SCALE, robust_scale
+from .covariance import body_covariance, body_covariances
+from .fit import (fit_bodies, fit_body, rescale_translation, rescale_translations, RESCALES,
+                  ROBUST_SCALE, robust_scale)
 from .model import (general_costs, Intrinsics, line_residuals, LineObservations,
                     marginal_costs, marginal_residuals)
 # the oracles of bench hopkins run the search's own steps
@@ -35,15 +37,16 @@ from .search import (assign_bodies, assign_fitted, general_search, general_warm,
                      marginal_segmentation, measured_noise, NOISE_FACTOR, position_costs,
                      POSITION_PRIOR, POSITION_WEIGHT, SIGMA_FLOOR_PX, spatial_labels,
                      WARM_INLIERS)
-from .starts import (fit_body_multistart, necker_mirror, PIVOT_KEEP, pivot_picks, PIVOT_RATES,
-                     pivot_starts, PIVOT_W, polish_body, T_SCALES, T_STARTS)
+from .starts import (fit_bodies_multistart, fit_body_multistart, necker_mirror, PIVOT_KEEP,
+                     pivot_picks, PIVOT_RATES, pivot_starts, PIVOT_W, polish_bodies,
+                     polish_body, T_SCALES, T_STARTS)
 
-__all__ = ['assign_bodies', 'assign_fitted', 'body_covariance', 'fit_body',
-           'fit_body_multistart', 'general_costs', 'general_search', 'general_warm',
-           'Intrinsics', 'line_residuals', 'LineObservations', 'marginal_costs',
-           'marginal_residuals', 'marginal_segmentation', 'measured_noise', 'necker_mirror',
-           'NOISE_FACTOR', 'PIVOT_KEEP', 'pivot_picks', 'PIVOT_RATES', 'pivot_starts', 'PIVOT_W',
-           'polish_body', 'position_costs', 'POSITION_PRIOR', 'POSITION_WEIGHT', 'RESCALES',
-           'rescale_translation', 'ROBUST_SCALE',
-           'robust_scale', 'SIGMA_FLOOR_PX', 'spatial_labels', 'T_SCALES', 'T_STARTS',
-           'WARM_INLIERS']
+__all__ = ['assign_bodies', 'assign_fitted', 'body_covariance', 'body_covariances',
+           'fit_bodies', 'fit_bodies_multistart', 'fit_body', 'fit_body_multistart',
+           'general_costs', 'general_search', 'general_warm', 'Intrinsics', 'line_residuals',
+           'LineObservations', 'marginal_costs', 'marginal_residuals', 'marginal_segmentation',
+           'measured_noise', 'necker_mirror', 'NOISE_FACTOR', 'PIVOT_KEEP', 'pivot_picks',
+           'PIVOT_RATES', 'pivot_starts', 'PIVOT_W', 'polish_bodies', 'polish_body',
+           'position_costs', 'POSITION_PRIOR', 'POSITION_WEIGHT', 'RESCALES',
+           'rescale_translation', 'rescale_translations', 'ROBUST_SCALE', 'robust_scale',
+           'SIGMA_FLOOR_PX', 'spatial_labels', 'T_SCALES', 'T_STARTS', 'WARM_INLIERS']

@@ -23,10 +23,11 @@ camera-centre rotation (the model holds) 5.8 -> 2.5 with 92% of the frames withi
 bound. A box fitted in a wrong basin stays far outside (NEES 34 to 5100): that is a second
 minimum, not a wider one.
 """
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 
+from .fit import padded_members
 from .jacobian import normal_equations
 from .model import _costs2, LineObservations
 from ..lines import orthonormal_pair
@@ -43,27 +44,54 @@ def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np
     then also scaled by the body's reduced chi-square (its fitted-direction costs over
     ``sigma2``) when above 1; ``fitted (L,)``: those costs of the tracks ``idx`` at ``(w, t)``
     if already known (:func:`.general_costs`; NaN: fewer than 3 frames, no constraint).
+    One body of :func:`body_covariances`.
     """
-    if idx.size < 3:
-        return np.full((3, 3), np.inf)
-    rows = obs.rows[idx]
+    return body_covariances(obs, [idx], np.asarray(w, dtype=float)[None],
+                            np.asarray(t, dtype=float)[None], sigma2, marginal,
+                            None if fitted is None else [fitted])[0]
+
+
+def body_covariances(obs: LineObservations, members: Sequence[np.ndarray], W: np.ndarray,
+                     T: np.ndarray, sigma2: float, marginal: bool = False,
+                     fitted: Optional[Sequence[np.ndarray]] = None) -> np.ndarray:
+    """
+    Return :func:`body_covariance` of several bodies at once, ``(B, 3, 3)``.
+
+    ``members``: each body's track indices; ``W, T (B, 3)`` their motions; ``fitted``: each
+    body's fitted-direction costs of its tracks if known. A body with fewer than 3 tracks
+    gets an infinite covariance. The bodies are evaluated in one batch, their tracks padded
+    (:func:`.fit.padded_members`).
+    """
+    cov = np.full((len(members), 3, 3), np.inf)
+    some = [b for b, m in enumerate(members) if len(m) >= 3]          # bodies, not lines
+    if not some:
+        return cov
+    idx, mask = padded_members([members[b] for b in some])
+    W, T = np.asarray(W, dtype=float)[some], np.asarray(T, dtype=float)[some]
+    rows, base = obs.rows[idx], obs.m_first[idx]
     sigma = sigma2 if marginal else None
-    _, n0 = _costs2(rows, obs.m_first[idx], w, t, sigma)
+    _, n0 = _costs2(rows, base, W, T, sigma)
     # the Gauss-Newton information with the line directions marginalised (or fitted) and the
     # moments held, analytic (:func:`.jacobian.normal_equations`), in units of sigma2
-    info = normal_equations(rows, w[None], t[None], n0[None], orthonormal_pair(n0)[None],
-                            sigma)[0][0]
-    scale = 1.0
+    info = normal_equations(rows, W, T, n0, orthonormal_pair(n0), sigma, mask=mask)[0]
+    scale = np.ones(len(some))
     if marginal:
         # the data term alone: the fitted-direction costs (px^2, two unknowns per line); the
         # marginal residuals also hold the direction prior, which does not scale with sigma2
         if fitted is None:
-            fitted, _ = _costs2(rows, obs.m_first[idx], w, t, None)
-        dof = float(np.sum(2.0 * obs.frames[idx] - 4.0)) - 6.0
-        total = float(np.sum(np.nan_to_num(fitted, nan=0.0)))
-        if dof > 0 and np.isfinite(total):
-            scale = max(total / dof / sigma2, 1.0)
-    try:
-        return scale * sigma2 * np.linalg.pinv(info, rcond=1e-10)[:3, :3]
-    except np.linalg.LinAlgError:
-        return np.full((3, 3), np.inf)
+            costs = _costs2(rows, base, W, T, None)[0]
+        else:
+            costs = np.zeros(idx.shape)
+            for i, b in enumerate(some):                              # bodies, not lines
+                costs[i, :len(members[b])] = fitted[b]
+        dof = np.sum(mask * (2.0 * obs.frames[idx] - 4.0), axis=1) - 6.0
+        total = np.sum(np.where(mask > 0, np.nan_to_num(costs, nan=0.0), 0.0), axis=1)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            chi2 = np.where((dof > 0) & np.isfinite(total), total / dof / sigma2, 1.0)
+        scale = np.maximum(chi2, 1.0)
+    for i, b in enumerate(some):                                      # bodies, not lines
+        try:
+            cov[b] = scale[i] * sigma2 * np.linalg.pinv(info[i], rcond=1e-10)[:3, :3]
+        except np.linalg.LinAlgError:
+            pass
+    return cov

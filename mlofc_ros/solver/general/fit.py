@@ -12,15 +12,16 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """
-Levenberg-Marquardt fit of one body's motion ``(w, T)`` to its line tracks.
+Levenberg-Marquardt fit of a body's motion ``(w, T)`` to its line tracks.
 
 Variable projection: each line's own unknowns (its moment, and its direction unless
 marginalised) are eliminated for every motion tried (:mod:`.model`), so LM moves only the
-body's five or six motion parameters. Several runs on the same tracks advance in lockstep
-(:func:`_lm_runs`); the line cost may be robust (Cauchy, :func:`_robust_costs`).
+body's five or six motion parameters. Several runs advance in lockstep (:func:`_lm_runs`),
+on the same tracks (a body's starts) or each on its own (several bodies,
+:func:`fit_bodies`); the line cost may be robust (Cauchy, :func:`_robust_costs`).
 """
 from dataclasses import dataclass
-from typing import NamedTuple, Optional, Tuple
+from typing import NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -126,26 +127,71 @@ def rescale_translation(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t
 
     ``w``: the rotation (rad/frame), held; ``sigma2`` (px^2): the noise variance of the
     marginalised cost, whose translation scale means something only at that level (a fit at
-    a small noise leaves it nearly free). One batched cost evaluation.
+    a small noise leaves it nearly free). One body of :func:`rescale_translations`.
     """
-    cands = np.asarray(t, dtype=float) * RESCALES[:, None]
-    costs = _scan_costs(obs.rows[idx], obs.m_first[idx], np.asarray(w, dtype=float), cands,
-                        sigma2)
-    return cands[int(np.argmin(costs))]
+    return rescale_translations(obs, [idx], np.asarray(w, dtype=float)[None],
+                                np.asarray(t, dtype=float)[None], sigma2)[0]
+
+
+def rescale_translations(obs: LineObservations, members: Sequence[np.ndarray], W: np.ndarray,
+                         T: np.ndarray, sigma2: float) -> np.ndarray:
+    """
+    Return each body's ``T (B, 3)`` at the scale of :data:`RESCALES` that fits it best.
+
+    ``members``: each body's track indices (non-empty); ``W, T (B, 3)``: the bodies'
+    motions, W held; ``sigma2`` as in :func:`rescale_translation`. Every body and scale in
+    one batched cost evaluation (the bodies' tracks padded, :func:`padded_members`), or a
+    few when the batch would exceed 4 :data:`_BATCH`.
+    """
+    idx, mask = padded_members(members)
+    cands = np.asarray(T, dtype=float)[:, None, :] * RESCALES[:, None]          # (B, R, 3)
+    w = np.broadcast_to(np.asarray(W, dtype=float)[:, None, :], cands.shape)
+    size = max(1, 4 * _BATCH // (cands.shape[1] * idx.shape[1] * obs.rows.shape[1]))
+    out = np.empty_like(T, dtype=float)
+    for s in range(0, idx.shape[0], size):               # chunks of bodies, not lines
+        part = slice(s, s + size)
+        rows = obs.rows[idx[part]]                                  # (B, L, K, 2, 3)
+        res, _ = _costs2(rows, obs.m_first[idx[part]][:, None], w[part], cands[part], sigma2,
+                         products=_row_products(rows)[:, None])        # (B, R, L)
+        totals = np.where(mask[part, None] > 0, res, 0.0).sum(axis=-1)
+        out[part] = cands[part][np.arange(totals.shape[0]), np.argmin(totals, axis=1)]
+    return out
 
 
 class _Tracks(NamedTuple):
-    """One body's tracks and cost, as every LM run on them evaluates them."""
+    """
+    The tracks and cost of LM runs, as every run evaluates them.
+
+    Shared by all runs (one body), or each run its own (several bodies in lockstep): then
+    every array has a leading run axis, and the runs' tracks are padded to one length by
+    repeating a track of their own, with ``mask`` 0 (:func:`fit_bodies`).
+    """
 
     rows: np.ndarray                 # (L, K, 2, 3) observation rows, gathered once
     products: Optional[np.ndarray]   # (9K, L) their row products (marginalised costs)
     sigma2: Optional[float]          # None: fitted line directions; else marginalised (px^2)
     scale: Optional[np.ndarray]      # (L,) robust cost's scale; None: least squares
+    mask: Optional[np.ndarray] = None    # (S, L) per run: 1 its lines, 0 padding; None: shared
 
     @property
     def free(self) -> bool:
         """Return whether T has a length of its own (marginalised directions), not unit."""
         return self.sigma2 is not None
+
+    def of(self, runs: Sequence[int]) -> '_Tracks':
+        """Return the tracks of the runs ``runs``, one entry per run (shared: as they are)."""
+        if self.mask is None:
+            return self
+        pick = np.asarray(runs, dtype=np.intp)
+        return _Tracks(self.rows[pick], None if self.products is None else self.products[pick],
+                       self.sigma2, None if self.scale is None else self.scale[pick],
+                       self.mask[pick])
+
+    def totals(self, res: np.ndarray) -> list:
+        """Return each run's total cost from its line costs ``res (S, L)`` (:meth:`of`)."""
+        if self.mask is None:
+            return [float(r.sum()) for r in res]
+        return [float(r.sum()) for r in np.where(self.mask > 0, res, 0.0)]
 
 
 @dataclass
@@ -160,10 +206,13 @@ class _Runs:
 
 
 def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndarray,
-             iterations: int, sigma2: Optional[float], robust: Optional[float] = None
-             ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+             iterations: int, sigma2: Optional[float], robust: Optional[float] = None,
+             mask: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Run :func:`fit_body` independently from each of ``(W0, T0) (S, 3)`` on the same tracks.
+
+    ``idx (L,)``: the tracks; or ``idx (S, L)`` with ``mask (S, L)``: each run its own tracks,
+    padded (:func:`fit_bodies`).
 
     Returns ``W (S, 3)``, ``T (S, 3)`` and costs ``(S,)``. The runs advance in lockstep so that
     every numpy call serves all of them: each call is dominated by its fixed overhead at these
@@ -179,7 +228,7 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
     """
     scale = None if robust is None else robust_scale(obs.frames[idx], robust)
     rows = obs.rows[idx]
-    tracks = _Tracks(rows, None if sigma2 is None else _row_products(rows), sigma2, scale)
+    tracks = _Tracks(rows, None if sigma2 is None else _row_products(rows), sigma2, scale, mask)
     W = np.array(W0, dtype=float)
     T = np.array(T0, dtype=float)
     if not tracks.free:
@@ -188,7 +237,7 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
             T[s] = T[s] / nt if nt > 1e-12 else np.array([0.0, 0.0, 1.0])
     res, n0 = _totals(tracks.rows, obs.m_first[idx], W, T, sigma2, scale,
                       products=tracks.products)
-    runs = _Runs(W, T, n0, [float(r.sum()) for r in res], [1e-3] * W.shape[0])
+    runs = _Runs(W, T, n0, tracks.totals(res), [1e-3] * W.shape[0])
     active = np.arange(W.shape[0])                       # runs still iterating
     for _ in range(iterations):
         if active.size == 0:
@@ -196,7 +245,7 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
         Ta, n0a = T[active], n0[active]
         bases = [np.eye(3) if tracks.free else _tangent(t) for t in Ta]
         basis = orthonormal_pair(n0a)                    # shared by probes and the next pass
-        systems = _normal_equations(tracks, W[active], Ta, n0a, bases, basis)
+        systems = _normal_equations(tracks.of(active), W[active], Ta, n0a, bases, basis)
         accepted = _line_search(tracks, runs, active, systems, Ta, bases, n0a, basis)
         active = active[[a for a in range(active.size)
                          if a in accepted and not np.linalg.norm(accepted[a]) < 1e-12]]
@@ -218,7 +267,8 @@ def _normal_equations(tracks: _Tracks, W: np.ndarray, T: np.ndarray, n0: np.ndar
     :func:`.orthonormal_pair`; ``bases``: each run's basis of the T parameters. Analytic
     derivatives, every run in one batch (:func:`.jacobian.normal_equations`).
     """
-    H, g = normal_equations(tracks.rows, W, T, n0, basis, tracks.sigma2, tracks.scale)
+    H, g = normal_equations(tracks.rows, W, T, n0, basis, tracks.sigma2, tracks.scale,
+                            tracks.mask)
     if tracks.free:
         return list(zip(H, g))
     systems = []
@@ -258,13 +308,15 @@ def _line_search(tracks: _Tracks, runs: _Runs, active: np.ndarray, systems: list
         pos = [a for a, _, _ in cand]
         cw = np.array([runs.W[active[a]] + step[:3] for a, step, _ in cand])
         ct = np.array([_moved(T[a], step, bases[a], tracks.free) for a, step, _ in cand])
-        rn, n0n = _totals(tracks.rows, n0[pos], cw, ct, tracks.sigma2, tracks.scale,
-                          basis[pos], tracks.products)
+        mine = tracks.of(active[pos])
+        rn, n0n = _totals(mine.rows, n0[pos], cw, ct, mine.sigma2, mine.scale, basis[pos],
+                          mine.products)
+        totals = mine.totals(rn)
         for i, (a, step, lam_a) in enumerate(cand):      # each run's tries in order
             s = active[a]
             if a in accepted:
                 continue
-            c = rn[i].sum()
+            c = totals[i]
             if c < runs.cost[s]:
                 runs.W[s], runs.T[s], runs.n0[s], runs.cost[s] = cw[i], ct[i], n0n[i], float(c)
                 runs.lam[s] = max(lam_a / 5.0, 1e-12)
@@ -297,6 +349,88 @@ def fit_body(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, t0: np.ndar
     return W[0], T[0], float(cost[0])
 
 
+def fit_bodies(obs: LineObservations, members: Sequence[np.ndarray], W0: np.ndarray,
+               T0: np.ndarray, iterations: int, sigma2: Optional[float] = None,
+               robust: Optional[float] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Fit several bodies at once: :func:`fit_body` of ``members[b]`` from ``(W0[b], T0[b])``.
+
+    ``members``: each body's track indices (non-empty); ``W0, T0 (B, 3)``. Returns
+    ``W, T (B, 3)`` and costs ``(B,)``, each as :func:`fit_body` returns it up to rounding:
+    the bodies' LM runs go in lockstep, each on its own tracks padded to the longest by
+    repeating its first track at weight 0 (one numpy call per step serves every body: at tens
+    of tracks a body each call's fixed overhead dominates).
+    """
+    idx, mask = padded_members(members)
+    W, T, cost = _lm_runs(obs, idx, np.asarray(W0, dtype=float), np.asarray(T0, dtype=float),
+                          iterations, sigma2, robust, mask)
+    return W, T, cost
+
+
+def padded_members(members: Sequence[np.ndarray]) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return the bodies' track indices padded to one length ``(B, L)`` and their mask ``(B, L)``.
+
+    ``members``: each body's track indices (non-empty). A body's padding repeats its first
+    track (a real track: its costs stay finite) at mask 0; mask 1 marks its own tracks.
+    """
+    longest = max(len(m) for m in members)
+    idx = np.empty((len(members), longest), dtype=np.intp)
+    mask = np.zeros((len(members), longest))
+    for b, m in enumerate(members):                      # bodies, not lines
+        idx[b] = m[0]
+        idx[b, :len(m)] = m
+        mask[b, :len(m)] = 1.0
+    return idx, mask
+
+
+def best_fits(obs: LineObservations, members: Sequence[np.ndarray], W0: np.ndarray,
+              T0: np.ndarray, iterations: int, sigma2: Optional[float],
+              robust: Optional[float] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return :func:`_best_fit` of several bodies from ``(W0[b], T0[b])``: ``W, T (B, 3)``, costs.
+
+    ``members``: each body's track indices (non-empty); each body also runs from T = 0
+    (:func:`with_zero_start`). Every run of every body goes in one lockstep batch
+    (:func:`fit_bodies`).
+    """
+    W0, T0 = np.asarray(W0, dtype=float), np.asarray(T0, dtype=float)
+    body, w_runs, t_runs = [], [], []
+    for b in range(len(members)):                        # bodies, not lines
+        ws, ts = with_zero_start(W0[b], W0[b][None], T0[b][None], sigma2)
+        body += [b] * len(ts)
+        w_runs.append(ws)
+        t_runs.append(ts)
+    W, T, cost = fit_bodies(obs, [members[b] for b in body], np.concatenate(w_runs),
+                            np.concatenate(t_runs), iterations, sigma2, robust)
+    best = first_cheapest(np.asarray(body), cost, len(members))
+    return W[best], T[best], cost[best]
+
+
+def first_cheapest(body: np.ndarray, cost: np.ndarray, n: int) -> np.ndarray:
+    """Return, for each of ``n`` bodies, the first of its runs (``body (R,)``) that costs least."""
+    best = np.full(n, -1)
+    for r in range(body.size):                           # runs, not lines
+        b = body[r]
+        if best[b] < 0 or cost[r] < cost[best[b]]:
+            best[b] = r
+    return best
+
+
+def with_zero_start(w0: np.ndarray, W0: np.ndarray, starts: np.ndarray,
+                    sigma2: Optional[float]) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return the starts ``W0, starts (S, 3)`` with T = 0 at ``w0`` added if they lack it.
+
+    Marginalised directions only (``sigma2``): the cost is even in T, so T = 0 is stationary
+    and no LM run started at another T returns to it.
+    """
+    if sigma2 is not None and np.all(np.any(starts != 0.0, axis=1)):
+        return (np.concatenate([W0, np.asarray(w0, dtype=float)[None]]),
+                np.concatenate([starts, np.zeros((1, 3))]))
+    return W0, starts
+
+
 def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np.ndarray,
               iterations: int, sigma2: Optional[float], w_starts: Optional[np.ndarray] = None,
               robust: Optional[float] = None) -> Tuple[np.ndarray, np.ndarray, float]:
@@ -304,14 +438,12 @@ def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np
     Run :func:`fit_body` from ``w0`` and each T of ``starts (S, 3)``; the cheapest wins.
 
     ``w_starts (S, 3)``: a rotation per start instead of ``w0`` for all. With marginalised
-    directions (``sigma2``) T = 0 (at ``w0``) is always one of the starts: the cost is even in
-    T, so T = 0 is stationary and no LM run started at another T returns to it.
+    directions (``sigma2``) T = 0 (at ``w0``) is always one of the starts
+    (:func:`with_zero_start`).
     """
     w0 = np.asarray(w0, dtype=float)
     W0 = np.broadcast_to(w0, starts.shape) if w_starts is None else w_starts
-    if sigma2 is not None and np.all(np.any(starts != 0.0, axis=1)):
-        starts = np.concatenate([starts, np.zeros((1, 3))])
-        W0 = np.concatenate([W0, w0[None]])
+    W0, starts = with_zero_start(w0, W0, starts, sigma2)
     W, T, cost = _lm_runs(obs, idx, W0, starts, iterations, sigma2, robust)  # in lockstep
     best = 0
     for s in range(1, cost.size):                        # a few starts, not lines

@@ -122,20 +122,22 @@ def _components(x: np.ndarray) -> list:
 
 def normal_equations(rows: np.ndarray, W: np.ndarray, T: np.ndarray, n0: np.ndarray,
                      basis: np.ndarray, sigma2: Optional[float],
-                     scale: Optional[np.ndarray] = None
+                     scale: Optional[np.ndarray] = None, mask: Optional[np.ndarray] = None
                      ) -> Tuple[np.ndarray, np.ndarray]:
     """
     Return the reduced Gauss-Newton systems ``H (A, 6, 6)``, ``g (A, 6)`` of motions ``W, T``.
 
-    ``rows (L, K, 2, 3)``: the tracks' whitened observation rows; ``W, T (A, 3)``: one motion
+    ``rows (L, K, 2, 3)``: the tracks' whitened observation rows, or ``(A, L, K, 2, 3)`` each
+    run its own; ``W, T (A, 3)``: one motion
     per run; ``n0 (A, L, 3)``: the runs' moments (held), ``basis (A, L, 3, 2)`` their
     :func:`.orthonormal_pair`. ``sigma2`` (px^2): marginalised directions at that noise (the
-    log-determinant included); None: fitted directions. ``scale (L,)``: the robust cost's
-    (:func:`.fit.robust_scale`): each line weighted by ``s / (s + q)`` at its current
-    quadratic cost ``q`` (iteratively reweighted), the log-determinant not. Parameters:
+    log-determinant included); None: fitted directions. ``scale (L,)`` or ``(A, L)``: the
+    robust cost's (:func:`.fit.robust_scale`): each line weighted by ``s / (s + q)`` at its
+    current quadratic cost ``q`` (iteratively reweighted), the log-determinant not.
+    ``mask (A, L)``: 1 for a run's lines, 0 for its padding (left out). Parameters:
     ``(w, T)`` in rad per frame and T's units; ``g`` is half the cost's gradient at ``n0``.
     """
-    L, K = rows.shape[0], rows.shape[1]
+    L, K = rows.shape[-4], rows.shape[-3]
     A = W.shape[0]
     An, Av = _design(rows, W, T)                                          # (A, L, 2K, 3)
     r0 = _apply(An, n0)                                                   # (A, L, 2K)
@@ -157,11 +159,13 @@ def normal_equations(rows: np.ndarray, W: np.ndarray, T: np.ndarray, n0: np.ndar
     rho = r0 + (M @ u[..., None])[..., 0]                                 # (A, L, 2K)
     v0 = (basis @ u[..., None])[..., 0]                                   # (A, L, 3)
     d = _Derivatives(W, T, K)
-    e = list(np.ascontiguousarray(rows.transpose(3, 1, 2, 0)))            # 3 x (K, 2, L)
+    e = list(np.ascontiguousarray(np.moveaxis(rows, (-1, -4), (0, -1))))  # 3 x (K, 2, L)
     J = np.stack(d.rows(e, d.rotated(_components(v0)), d.rotated(_components(n0))), axis=-1)
     J = np.ascontiguousarray(np.moveaxis(J, 3, 1)).reshape(A, L, 2 * K, 6)
     q = np.sum(rho * rho, axis=-1) + reg * np.sum(u * u, axis=-1)         # (A, L)
     wt = np.ones((A, L)) if scale is None else scale / (scale + q)
+    if mask is not None:
+        wt = wt * mask
     G = MT @ J                                                            # (A, L, 2, 6)
     Jw = J * wt[..., None, None]
     H = (np.swapaxes(Jw.reshape(A, -1, 6), -1, -2) @ J.reshape(A, -1, 6)
@@ -178,6 +182,8 @@ def normal_equations(rows: np.ndarray, W: np.ndarray, T: np.ndarray, n0: np.ndar
         dL = 2.0 * sigma2 * np.stack(d.rows(e, d.rotated(y), summed=True), axis=-1)
         live = logdet > 1e-12 * sigma2
         root = np.where(live, 1.0 / np.sqrt(np.where(live, logdet, 1.0)), 0.0)
+        if mask is not None:
+            root = root * mask
         jl = 0.5 * dL * root[..., None]                                   # d sqrt(logdet)
         H = H + np.swapaxes(jl, -1, -2) @ jl
         g = g + np.sum(jl * np.sqrt(np.maximum(logdet, 0.0))[..., None], axis=1)

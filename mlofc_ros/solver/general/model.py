@@ -106,20 +106,21 @@ def _design(rows: np.ndarray, w: np.ndarray, t: np.ndarray) -> Tuple[np.ndarray,
     """
     Return the linear constraints of tracks with whitened observation ``rows (L, K, 2, 3)``.
 
-    ``w, t (..., 3)``: one motion or a batch of them (leading axes ``...``). Returns
+    ``w, t (..., 3)``: one motion or a batch of them (leading axes ``...``); ``rows`` may carry
+    the same leading axes (each motion its own tracks). Returns
     ``An (..., L, 2K, 3)`` acting on the moment ``n0`` and ``Av (..., L, 2K, 3)`` acting on the
     direction ``v0``; both are independent of the basis of ``v0`` (:func:`_direction_columns`),
     so a second pass at the same motion reuses them.
     """
-    L, K = rows.shape[0], rows.shape[1]
+    L, K = rows.shape[-4], rows.shape[-3]
     Rk, Tk = _motion_terms(w, t, K)
     lead = Rk.shape[:-3]
     # (R^-k e) . n0 = e . R^k n0  ->  rows @ R^k ; e . (T_k x R^k v0) = (e x T_k) . R^k v0.
     # Written out term by term, lines last: long contiguous inner loops over the lines instead
     # of einsum's 3-long ones (3-5x faster on a batch), and the same products and sums in the
     # same order as einsum('lkji,kim->lkjm') and np.cross, so bit for bit the same result.
-    rT = np.ascontiguousarray(np.moveaxis(rows, 0, -1))             # (K, 2, 3, L)
-    r = [np.ascontiguousarray(rT[:, :, i, None, :]) for i in range(3)]  # (K, 2, 1, L)
+    rT = np.ascontiguousarray(np.moveaxis(rows, -4, -1))            # (K, 2, 3, L)
+    r = [np.ascontiguousarray(rT[..., i, None, :]) for i in range(3)]  # (K, 2, 1, L)
     Rb = Rk[..., :, None, :, :, None]                                # (..., K, 1, 3, 3, 1)
     Tb = Tk[..., :, None, :, None]                                   # (..., K, 1, 3, 1)
     An = r[0] * Rb[..., 0, :, :] + r[1] * Rb[..., 1, :, :] + r[2] * Rb[..., 2, :, :]
@@ -203,23 +204,23 @@ def _row_products(rows: np.ndarray) -> np.ndarray:
     """
     Return ``sum_r e e^T`` of each track's two observation rows per frame, ``(9 K, L)``.
 
-    ``rows (L, K, 2, 3)``; laid out frame, row index, column index first, tracks last: the
-    motion-independent part of every :func:`_grams`.
+    ``rows (..., L, K, 2, 3)``; laid out frame, row index, column index first, tracks last:
+    the motion-independent part of every :func:`_grams`.
     """
-    P = np.einsum('lkri,lkrj->kijl', rows, rows)
-    return np.ascontiguousarray(P.reshape(-1, rows.shape[0]))
+    P = np.einsum('...lkri,...lkrj->...kijl', rows, rows)
+    return np.ascontiguousarray(P.reshape(rows.shape[:-4] + (-1, rows.shape[-4])))
 
 
 def _grams(products: np.ndarray, w: np.ndarray, t: np.ndarray, n_frames: int) -> Grams:
     """
     Return the :data:`Grams` of the constraints (:func:`_design`) at motions ``w, t (..., 3)``.
 
-    ``products (9 K, L)``: :func:`_row_products`. A constraint row is ``e^T R^k`` on the moment
-    and ``e^T [T_k]_x R^k`` on the direction, so each Gram block is
-    ``sum_k X_k^T (sum_r e e^T) Y_k``: linear in the row products, with weights from the
-    motion alone, one matrix product per motion instead of ``2K x 3`` constraints per line.
-    They hold all that the marginalised cost needs, whatever the basis of ``v0``: two passes
-    at the same motion (:func:`_costs2`) share them.
+    ``products (9 K, L)``, or ``(..., 9 K, L)`` one per motion: :func:`_row_products`. A
+    constraint row is ``e^T R^k`` on the moment and ``e^T [T_k]_x R^k`` on the direction, so
+    each Gram block is ``sum_k X_k^T (sum_r e e^T) Y_k``: linear in the row products, with
+    weights from the motion alone, one matrix product per motion instead of ``2K x 3``
+    constraints per line. They hold all that the marginalised cost needs, whatever the basis
+    of ``v0``: two passes at the same motion (:func:`_costs2`) share them.
     """
     Rk, Tk = _motion_terms(w, t, n_frames)                           # (..., K, 3, 3)
     Q = skew(Tk) @ Rk
@@ -387,7 +388,8 @@ def _costs2(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
     """
     Return costs ``(..., L)`` and moments after two passes (the v0 plane follows the moment).
 
-    ``rows (L, K, 2, 3)``: the tracks' observation rows; ``w, t (..., 3)`` one motion or a
+    ``rows (L, K, 2, 3)``: the tracks' observation rows, or ``(..., L, K, 2, 3)`` each
+    motion its own; ``w, t (..., 3)`` one motion or a
     batch; ``base (L, 3)`` or ``(..., L, 3)`` the first pass's moments, ``basis`` their
     :func:`.orthonormal_pair` if known. Both passes share the motion's constraints.
     ``logdet_out``: a list that receives the second pass's log-determinant terms (marginalised);
@@ -397,7 +399,7 @@ def _costs2(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
         An, Av = _design(rows, w, t)
         _, n0 = _evaluate(An, Av, base, None, basis=basis)
         return _evaluate(An, Av, n0, None)
-    grams = _grams(_row_products(rows) if products is None else products, w, t, rows.shape[1])
+    grams = _grams(_row_products(rows) if products is None else products, w, t, rows.shape[-3])
     _, n0 = _marginal_costs(grams, base, sigma2, basis)
     return _marginal_costs(grams, n0, sigma2, logdet_out=logdet_out)
 

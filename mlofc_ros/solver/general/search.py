@@ -26,9 +26,9 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from .fit import _best_fit
+from .fit import best_fits
 from .model import general_costs, LineObservations, marginal_costs
-from .starts import fit_body_multistart
+from .starts import fit_bodies_multistart
 from ..ksubspaces import assign, total_cost
 from ..models import chi2_quantile
 from ..spatial import smooth_labels
@@ -116,18 +116,21 @@ def _fit_each_body(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: 
     :func:`.pivot_starts` towards the body's lines when ``pivots`` and a Necker check
     (:func:`.fit_body_multistart`), and become fitted (``keep`` LM runs of
     ``first_iterations``). ``sigma2``: marginalised directions (:func:`.marginal_residuals`).
+    The bodies' runs go in lockstep batches (:func:`.fit.best_fits`,
+    :func:`.fit_bodies_multistart`).
     """
-    for b in range(W.shape[0]):                               # bodies, not lines
-        idx = np.flatnonzero(labels == b)
-        if idx.size < 3:
-            continue
-        if fitted[b]:
-            W[b], T[b], _ = _best_fit(obs, idx, W[b], np.atleast_2d(T[b]), iterations, sigma2)
-        else:
-            W[b], T[b], _ = fit_body_multistart(
-                obs, idx, w_start(b), None if t_start is None else t_start(b),
-                first_iterations, keep, sigma2, obs.body_ray(idx), pivots)
-            fitted[b] = True
+    members = [np.flatnonzero(labels == b) for b in range(W.shape[0])]   # bodies, not lines
+    refit = [b for b in range(W.shape[0]) if fitted[b] and members[b].size >= 3]
+    if refit:                        # the fitted bodies' runs in one lockstep batch
+        W[refit], T[refit], _ = best_fits(obs, [members[b] for b in refit], W[refit],
+                                          T[refit], iterations, sigma2)
+    first = [b for b in range(W.shape[0]) if not fitted[b] and members[b].size >= 3]
+    if first:                        # and the others' multi-start searches in another
+        W0 = np.array([w_start(b) for b in first])
+        T0 = None if t_start is None else np.array([t_start(b) for b in first])
+        W[first], T[first], _ = fit_bodies_multistart(
+            obs, [members[b] for b in first], W0, T0, first_iterations, keep, sigma2, pivots)
+        fitted[first] = True
 
 
 def _assign_marginal(costs: np.ndarray, logdet: np.ndarray, dof: np.ndarray, sigma2: float,

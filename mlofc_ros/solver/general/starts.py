@@ -19,11 +19,12 @@ without a previous fit is therefore scanned over many starts (:func:`fit_body_mu
 the best few refined in lockstep (:func:`.fit._best_fit`), and every winner is checked against
 its depth-reversed motion (:func:`necker_mirror`).
 """
-from typing import Optional, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from .fit import _best_fit, _lm_runs, _scan_costs, robust_scale
+from .fit import (_best_fit, _scan_costs, best_fits, first_cheapest, fit_bodies,
+                  robust_scale, with_zero_start)
 from .model import LineObservations
 from ..lines import rotation_matrix
 
@@ -119,6 +120,47 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
     is tried too. The cheapest run wins. ``robust`` (px^2): scans, fits and comparisons on
     the robust cost at that noise level (:func:`.fit._lm_runs`).
     """
+    w_starts, starts = _multistart(obs, idx, w0, t0, keep, sigma2, ray, pivots, robust,
+                                   per_rate)
+    fit = _best_fit(obs, idx, w0, starts, iterations, sigma2, w_starts, robust)
+    return fit if ray is None else _necker_check(obs, idx, fit, ray, iterations, sigma2, robust)
+
+
+def fit_bodies_multistart(obs: LineObservations, members: Sequence[np.ndarray],
+                          W0: np.ndarray, T0: Optional[np.ndarray] = None,
+                          iterations: int = 15, keep: int = 3,
+                          sigma2: Optional[float] = None, pivots: bool = True,
+                          robust: Optional[float] = None, per_rate: bool = False
+                          ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return :func:`fit_body_multistart` of several bodies: ``W, T (B, 3)`` and costs ``(B,)``.
+
+    ``members``: each body's track indices (at least one); ``W0 (B, 3)``, ``T0 (B, 3)`` (or
+    None) their starts; each body's ``ray`` is :meth:`.LineObservations.body_ray`. Every
+    run of every body goes in one lockstep batch (:func:`.fit.fit_bodies`), then every
+    winner's mirror (:func:`polish_bodies`' check).
+    """
+    W0 = np.asarray(W0, dtype=float)
+    body, w_runs, t_runs = [], [], []
+    for b, idx in enumerate(members):                    # bodies, not lines
+        ws, ts = _multistart(obs, idx, W0[b], None if T0 is None else T0[b], keep, sigma2,
+                             obs.body_ray(idx), pivots, robust, per_rate)
+        ws, ts = with_zero_start(W0[b], ws, ts, sigma2)
+        body += [b] * len(ts)
+        w_runs.append(ws)
+        t_runs.append(ts)
+    W, T, cost = fit_bodies(obs, [members[b] for b in body], np.concatenate(w_runs),
+                            np.concatenate(t_runs), iterations, sigma2, robust)
+    best = first_cheapest(np.asarray(body), cost, len(members))
+    return _necker_checks(obs, members, W[best], T[best], cost[best], None, iterations,
+                          sigma2, robust)
+
+
+def _multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
+                t0: Optional[np.ndarray], keep: int, sigma2: Optional[float],
+                ray: Optional[np.ndarray], pivots: bool, robust: Optional[float],
+                per_rate: bool) -> Tuple[np.ndarray, np.ndarray]:
+    """Return :func:`fit_body_multistart`'s starts ``W, T (S, 3)`` of the tracks ``idx``."""
     rows, base = obs.rows[idx], obs.m_first[idx]
     scale = None if robust is None else robust_scale(obs.frames[idx], robust)
     if sigma2 is None and t0 is not None:
@@ -137,15 +179,13 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
         scan = _scan_costs(rows, base, np.asarray(w0, dtype=float), cands,
                            sigma2, scale)                # a few hundred starts, vectorised
         starts = cands[np.argsort(scan)[:keep]]
-    w_starts = None
+    w_starts = np.broadcast_to(np.asarray(w0, dtype=float), starts.shape)
     if ray is not None and pivots:
         pw, pt = pivot_starts(np.asarray(ray, dtype=float))
         best = pivot_picks(_scan_costs(rows, base, pw, pt, sigma2, scale), per_rate)
-        w_starts = np.concatenate([np.broadcast_to(np.asarray(w0, dtype=float), starts.shape),
-                                   pw[best]])
+        w_starts = np.concatenate([w_starts, pw[best]])
         starts = np.concatenate([starts, pt[best]])
-    fit = _best_fit(obs, idx, w0, starts, iterations, sigma2, w_starts, robust)
-    return fit if ray is None else _necker_check(obs, idx, fit, ray, iterations, sigma2, robust)
+    return w_starts, starts
 
 
 def necker_mirror(w: np.ndarray, ray: np.ndarray) -> np.ndarray:
@@ -167,12 +207,9 @@ def _necker_check(obs: LineObservations, idx: np.ndarray,
                   sigma2: Optional[float], robust: Optional[float] = None
                   ) -> Tuple[np.ndarray, np.ndarray, float]:
     """Return ``fit`` or the LM run from its :func:`necker_mirror`, whichever is cheaper."""
-    w = necker_mirror(fit[0], ray)
-    t = _pivot_translation(w, ray)                       # the mirror turns about the pivot too
-    if sigma2 is None:
-        t = t * (np.linalg.norm(fit[1]) / max(np.linalg.norm(t), 1e-300))
-    W, T, cost = _lm_runs(obs, idx, w[None], t[None], iterations, sigma2, robust)
-    return (W[0], T[0], float(cost[0])) if cost[0] < fit[2] else fit
+    W, T, cost = _necker_checks(obs, [idx], fit[0][None], fit[1][None], np.array([fit[2]]),
+                                np.asarray(ray, dtype=float)[None], iterations, sigma2, robust)
+    return W[0], T[0], float(cost[0])
 
 
 def polish_body(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
@@ -185,7 +222,45 @@ def polish_body(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.nda
     the cost in W; at the measured noise the depth-reversed motion (:func:`necker_mirror`) may
     fit better, so an LM run from it goes beside the one from ``(w, t)`` (and from T = 0, as
     in every :func:`.fit._best_fit`) and the cheapest wins. ``robust``: as in
-    :func:`.fit._lm_runs`.
+    :func:`.fit._lm_runs`. One body of :func:`polish_bodies`.
     """
-    fit = _best_fit(obs, idx, w, np.atleast_2d(t), iterations, sigma2, robust=robust)
-    return _necker_check(obs, idx, fit, obs.body_ray(idx), iterations, sigma2, robust)
+    W, T, cost = polish_bodies(obs, [idx], np.asarray(w, dtype=float)[None],
+                               np.asarray(t, dtype=float)[None], iterations, sigma2, robust)
+    return W[0], T[0], float(cost[0])
+
+
+def polish_bodies(obs: LineObservations, members: Sequence[np.ndarray], W: np.ndarray,
+                  T: np.ndarray, iterations: int, sigma2: float, robust: Optional[float] = None
+                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return :func:`polish_body` of several bodies: ``W, T (B, 3)`` and costs ``(B,)``.
+
+    ``members``: each body's track indices (at least one); ``W, T (B, 3)`` their motions.
+    Every body's runs go in one lockstep batch (:func:`.fit.best_fits`), then every mirror's.
+    """
+    W, T, cost = best_fits(obs, members, W, T, iterations, sigma2, robust)
+    return _necker_checks(obs, members, W, T, cost, None, iterations, sigma2, robust)
+
+
+def _necker_checks(obs: LineObservations, members: Sequence[np.ndarray], W: np.ndarray,
+                   T: np.ndarray, cost: np.ndarray, rays: Optional[np.ndarray],
+                   iterations: int, sigma2: Optional[float], robust: Optional[float] = None
+                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return :func:`_necker_check` of several bodies' fits ``W, T (B, 3)``, costs ``(B,)``.
+
+    ``rays (B, 3)``: the lines of sight; None: each body's :meth:`.LineObservations.body_ray`.
+    The mirrors' LM runs go in one lockstep batch.
+    """
+    if rays is None:
+        rays = np.array([obs.body_ray(idx) for idx in members])     # bodies, not lines
+    Wm = 2.0 * np.sum(W * rays, axis=1, keepdims=True) * rays - W     # necker_mirror
+    # the mirror turns about the pivot too (:func:`_pivot_translation`, one per body)
+    Tm = rays - (rotation_matrix(Wm) @ rays[:, :, None])[:, :, 0]
+    if sigma2 is None:
+        Tm = Tm * (np.linalg.norm(T, axis=1) / np.maximum(np.linalg.norm(Tm, axis=1),
+                                                          1e-300))[:, None]
+    Wm, Tm, cost_m = fit_bodies(obs, members, Wm, Tm, iterations, sigma2, robust)
+    better = cost_m < cost
+    return (np.where(better[:, None], Wm, W), np.where(better[:, None], Tm, T),
+            np.where(better, cost_m, cost))
