@@ -530,12 +530,18 @@ def test_a_tracking_step_advances_the_bodies_without_a_search(monkeypatch):
     tracks, truth, W, motions = _two_spinning_bodies()
     init = truth.copy()
     init[::7] = -1                                       # new tracks have no label yet
-    searched = []
+    searched, rotation_only = [], []
     monkeypatch.setattr(general_method, 'fit_body_multistart',
                         lambda *a, **k: searched.append(1))
+    real = general_method.solve_robust
+    monkeypatch.setattr(general_method, 'solve_robust',
+                        lambda *a, **k: rotation_only.append(1) or real(*a, **k))
     res = segment_lines(tracks[:, 1:], 2, intrinsics=(F, F, C, C), method='general',
                         init_labels=init, init_motions=motions, step=True)
     assert res.diagnostics.start == 'step' and not searched
+    # the intrinsics given, a step runs no rotation-only solve and reports the camera's
+    assert not rotation_only and res.focal_length == F
+    assert res.diagnostics.principal_point == (C, C) and res.diagnostics.aspect == 1.0
     assert np.count_nonzero(res.labels != truth) <= 1   # one line fits both bodies
     for b in range(2):
         err = np.linalg.norm(res.angular_velocities[b] - W[b]) / np.linalg.norm(W[b])

@@ -99,7 +99,7 @@ class WarmStarts:
             if method.accepts('step') and self.steps >= 0 and not self.full_next:
                 out['step'] = True
                 if self.steps % RESCAN_EVERY == RESCAN_EVERY - 1:
-                    # one body in turn: its pivot search costs ~20 steps
+                    # one body in turn: its pivot search costs about three steps
                     out['rescan'] = [(self.steps // RESCAN_EVERY) % n]
             elif method.rescans:
                 out['rescan'] = list(range(n))
