@@ -390,14 +390,28 @@ def best_fits(obs: LineObservations, members: Sequence[np.ndarray], W0: np.ndarr
     """
     Return :func:`_best_fit` of several bodies from ``(W0[b], T0[b])``: ``W, T (B, 3)``, costs.
 
-    ``members``: each body's track indices (non-empty); each body also runs from T = 0
-    (:func:`with_zero_start`). Every run of every body goes in one lockstep batch
-    (:func:`fit_bodies`).
+    ``members``: each body's track indices (non-empty). One batch of
+    :func:`best_of_starts`.
     """
     W0, T0 = np.asarray(W0, dtype=float), np.asarray(T0, dtype=float)
+    return best_of_starts(obs, members, W0, [(w[None], t[None]) for w, t in zip(W0, T0)],
+                          iterations, sigma2, robust)
+
+
+def best_of_starts(obs: LineObservations, members: Sequence[np.ndarray], W0: np.ndarray,
+                   starts: Sequence[Tuple[np.ndarray, np.ndarray]], iterations: int,
+                   sigma2: Optional[float], robust: Optional[float] = None
+                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Run each body's LM from each of its starts; return the cheapest run's ``W, T (B, 3)``, costs.
+
+    ``starts[b]``: body b's starting ``(W (S, 3), T (S, 3))``, to which T = 0 at ``W0[b]`` is
+    added (:func:`with_zero_start`); the first of a body's cheapest runs wins, as in
+    :func:`_best_fit`. Every run of every body goes in one lockstep batch (:func:`fit_bodies`).
+    """
     body, w_runs, t_runs = [], [], []
-    for b in range(len(members)):                        # bodies, not lines
-        ws, ts = with_zero_start(W0[b], W0[b][None], T0[b][None], sigma2)
+    for b, (ws, ts) in enumerate(starts):                # bodies, not lines
+        ws, ts = with_zero_start(W0[b], ws, ts, sigma2)
         body += [b] * len(ts)
         w_runs.append(ws)
         t_runs.append(ts)

@@ -23,8 +23,7 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from .fit import (_best_fit, _scan_costs, best_fits, first_cheapest, fit_bodies,
-                  robust_scale, with_zero_start)
+from .fit import _best_fit, _scan_costs, best_fits, best_of_starts, fit_bodies, robust_scale
 from .model import LineObservations
 from ..lines import rotation_matrix
 
@@ -141,19 +140,11 @@ def fit_bodies_multistart(obs: LineObservations, members: Sequence[np.ndarray],
     winner's mirror (:func:`polish_bodies`' check).
     """
     W0 = np.asarray(W0, dtype=float)
-    body, w_runs, t_runs = [], [], []
-    for b, idx in enumerate(members):                    # bodies, not lines
-        ws, ts = _multistart(obs, idx, W0[b], None if T0 is None else T0[b], keep, sigma2,
-                             obs.body_ray(idx), pivots, robust, per_rate)
-        ws, ts = with_zero_start(W0[b], ws, ts, sigma2)
-        body += [b] * len(ts)
-        w_runs.append(ws)
-        t_runs.append(ts)
-    W, T, cost = fit_bodies(obs, [members[b] for b in body], np.concatenate(w_runs),
-                            np.concatenate(t_runs), iterations, sigma2, robust)
-    best = first_cheapest(np.asarray(body), cost, len(members))
-    return _necker_checks(obs, members, W[best], T[best], cost[best], None, iterations,
-                          sigma2, robust)
+    starts = [_multistart(obs, idx, W0[b], None if T0 is None else T0[b], keep, sigma2,
+                          obs.body_ray(idx), pivots, robust, per_rate)
+              for b, idx in enumerate(members)]                   # bodies, not lines
+    W, T, cost = best_of_starts(obs, members, W0, starts, iterations, sigma2, robust)
+    return _necker_checks(obs, members, W, T, cost, None, iterations, sigma2, robust)
 
 
 def _multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
