@@ -132,7 +132,7 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
     warm = init_labels is not None and init_motions is not None
     stepping = step and warm and enough
     if stepping and problem.intrinsics is not None:
-        # with the intrinsics given a step needs no rotation-only solve (10-15% of its CPU)
+        # with the intrinsics given a step needs no rotation-only solve (about 9% of its CPU)
         fx, fy, cx, cy = problem.intrinsics
         obs = LineObservations(problem.tracks, problem.intrinsics)
         given = Diagnostics(principal_point=(cx, cy), aspect=fy / fx,

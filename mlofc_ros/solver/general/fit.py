@@ -406,22 +406,22 @@ def best_of_starts(obs: LineObservations, members: Sequence[np.ndarray], W0: np.
     Run each body's LM from each of its starts; return the cheapest run's ``W, T (B, 3)``, costs.
 
     ``starts[b]``: body b's starting ``(W (S, 3), T (S, 3))``, to which T = 0 at ``W0[b]`` is
-    added (:func:`with_zero_start`); the first of a body's cheapest runs wins, as in
+    added (:func:`_with_zero_start`); the first of a body's cheapest runs wins, as in
     :func:`_best_fit`. Every run of every body goes in one lockstep batch (:func:`fit_bodies`).
     """
     body, w_runs, t_runs = [], [], []
     for b, (ws, ts) in enumerate(starts):                # bodies, not lines
-        ws, ts = with_zero_start(W0[b], ws, ts, sigma2)
+        ws, ts = _with_zero_start(W0[b], ws, ts, sigma2)
         body += [b] * len(ts)
         w_runs.append(ws)
         t_runs.append(ts)
     W, T, cost = fit_bodies(obs, [members[b] for b in body], np.concatenate(w_runs),
                             np.concatenate(t_runs), iterations, sigma2, robust)
-    best = first_cheapest(np.asarray(body), cost, len(members))
+    best = _first_cheapest(np.asarray(body), cost, len(members))
     return W[best], T[best], cost[best]
 
 
-def first_cheapest(body: np.ndarray, cost: np.ndarray, n: int) -> np.ndarray:
+def _first_cheapest(body: np.ndarray, cost: np.ndarray, n: int) -> np.ndarray:
     """Return, for each of ``n`` bodies, the first of its runs (``body (R,)``) that costs least."""
     best = np.full(n, -1)
     for r in range(body.size):                           # runs, not lines
@@ -431,8 +431,8 @@ def first_cheapest(body: np.ndarray, cost: np.ndarray, n: int) -> np.ndarray:
     return best
 
 
-def with_zero_start(w0: np.ndarray, W0: np.ndarray, starts: np.ndarray,
-                    sigma2: Optional[float]) -> Tuple[np.ndarray, np.ndarray]:
+def _with_zero_start(w0: np.ndarray, W0: np.ndarray, starts: np.ndarray,
+                     sigma2: Optional[float]) -> Tuple[np.ndarray, np.ndarray]:
     """
     Return the starts ``W0, starts (S, 3)`` with T = 0 at ``w0`` added if they lack it.
 
@@ -453,11 +453,11 @@ def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np
 
     ``w_starts (S, 3)``: a rotation per start instead of ``w0`` for all. With marginalised
     directions (``sigma2``) T = 0 (at ``w0``) is always one of the starts
-    (:func:`with_zero_start`).
+    (:func:`_with_zero_start`).
     """
     w0 = np.asarray(w0, dtype=float)
     W0 = np.broadcast_to(w0, starts.shape) if w_starts is None else w_starts
-    W0, starts = with_zero_start(w0, W0, starts, sigma2)
+    W0, starts = _with_zero_start(w0, W0, starts, sigma2)
     W, T, cost = _lm_runs(obs, idx, W0, starts, iterations, sigma2, robust)  # in lockstep
     best = 0
     for s in range(1, cost.size):                        # a few starts, not lines
