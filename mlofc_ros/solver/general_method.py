@@ -141,7 +141,6 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
                         spatial_neighbours(obs.midpoints), rescan)
         if stepped is not None:
             return stepped
-        stepping = False                    # the tracked solve below
     rot = solve_robust(problem, init_labels=init_labels, **ROTATION_STEP)
     if not enough:
         note = f'window has fewer than {MODEL_FRAMES} frames: rotation-only result'
@@ -151,7 +150,7 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
     obs = LineObservations(problem.tracks, (f, f * d.aspect) + tuple(d.principal_point))
     neighbours = spatial_neighbours(obs.midpoints)
     tracked = None
-    if stepping:
+    if stepping and problem.intrinsics is None:     # the focal length from the solve above
         stepped = _step(obs, d, f, init_labels, init_motions, neighbours, rescan)
         if stepped is not None:
             return stepped
