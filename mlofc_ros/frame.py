@@ -25,6 +25,8 @@ from typing import Any, Dict, FrozenSet, List, Optional, Tuple
 
 import numpy as np
 
+from .solver.focal import FOCAL_OBSERVABLE
+
 #: Keys of :attr:`FrameResult.timings` (milliseconds; ``detect``: the line detector alone, 0
 #: in the frames it does not run, part of ``detect_track``).
 TIMING_KEYS = ('detect_track', 'detect', 'undistort', 'window', 'solve', 'total')
@@ -66,6 +68,11 @@ class FrameResult:
         Why this frame gave no (or a degraded) result, for a warning; None when all went well.
     focal_length : float
         Focal length (px) the solver used or estimated; NaN when it did not run.
+    focal_log_sigma : float
+        Standard deviation of ``ln focal_length`` (about its relative error): 0 when given
+        (camera_info, ``focal_length`` parameter), the running estimate's when estimated
+        (at most :data:`~mlofc_ros.solver.focal.FOCAL_PRIOR_LOG_SIGMA`), NaN when the solver
+        did not run. The angular covariances include it.
     frame_interval : float
         Median frame interval of the window (s); NaN with fewer than two frames.
     n_tracks : int
@@ -94,6 +101,7 @@ class FrameResult:
     window_fill: int = 0
     problem: Optional[str] = None
     focal_length: float = math.nan
+    focal_log_sigma: float = math.nan
     frame_interval: float = math.nan
     n_tracks: int = 0
     skipped: bool = False
@@ -104,6 +112,11 @@ class FrameResult:
     def solved(self) -> bool:
         """Return whether at least one body has a valid angular velocity."""
         return bool(np.any(self.body_valid))
+
+    @property
+    def focal_observable(self) -> bool:
+        """Return whether the focal length is known within 10% (given, or estimated so)."""
+        return bool(self.focal_log_sigma <= FOCAL_OBSERVABLE)
 
 
 @dataclass
@@ -127,6 +140,9 @@ class Observation:
         Their endpoints over the window (undistorted) px, NaN where a track was not seen.
     intrinsics : (fx, fy, cx, cy) or None
         Solver intrinsics, px; None = estimate the focal length.
+    focal_log_sigma : float
+        Standard deviation of ``ln fx`` of ``intrinsics``: 0 when given (camera, parameter),
+        the running estimate's when estimated, NaN when ``intrinsics`` is None.
     image_size : (width, height)
         Pixels.
     window_fill : int
@@ -172,6 +188,7 @@ class Observation:
     skipped: bool = False
     undistorted: Optional[np.ndarray] = None
     epoch: int = 0
+    focal_log_sigma: float = 0.0
 
     @classmethod
     def skip(cls, stamp: float, gray: Optional[np.ndarray], problem: str, fill: int

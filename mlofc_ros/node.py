@@ -36,8 +36,13 @@ once per change and ignored: ``focal_length`` is used, or the focal length estim
 ``/diagnostics`` carries one ``DiagnosticStatus`` named ``mlofc: pipeline`` (``ns/mlofc:
 pipeline`` in a namespace; hardware_id = the image frame_id) at 1 Hz (steady clock): rate of
 processed frames (Hz), tracked lines, window fill, frames received/processed/dropped/skipped, the
-last problem and its age; level WARN while a problem is less than :attr:`MlofcNode.problem_hold`
-seconds old, OK otherwise.
+focal length (px) and its state (``given``; ``estimated +-x%``, known within 10%; ``not
+observable +-x%``), the last problem and its age; level WARN while a problem is less than
+:attr:`MlofcNode.problem_hold` seconds old, OK otherwise. Without a camera model the focal
+length is estimated from the scene and refined as long as the node runs
+(:class:`mlofc_ros.solver.focal.FocalEstimate`); the log says once when it becomes observable
+(within 10%) and once when it is not (a still scene, bodies that only translate), and the
+twists' covariances carry its uncertainty.
 
 The subscription callback only queues the image (a bounded queue of ``queue_size`` frames that
 drops the stalest frame), so the executor is never blocked by the work and any executor
@@ -110,6 +115,23 @@ def problem_kind(text: str) -> str:
     return re.sub(r"'[^']*'|\"[^\"]*\"|\d+", '#', text)
 
 
+def focal_state(r: FrameResult) -> Optional[str]:
+    """Return ``'given'``, ``'estimated'`` (within 10%) or ``'not observable'`` (None: no f)."""
+    if not (math.isfinite(r.focal_length) and r.focal_log_sigma >= 0):
+        return None
+    if r.focal_log_sigma == 0:
+        return 'given'
+    return 'estimated' if r.focal_observable else 'not observable'
+
+
+def focal_text(r: Optional[FrameResult]) -> str:
+    """Return the focal length's state for ``/diagnostics``, with its relative spread."""
+    state = None if r is None else focal_state(r)
+    if state is None:
+        return 'unknown'
+    return state if state == 'given' else f'{state} +-{100.0 * r.focal_log_sigma:.1f}%'
+
+
 def parameter_descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
     """ROS descriptor of a table entry (doubles use dynamic typing so ``:=1`` also works)."""
     d = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
@@ -173,6 +195,7 @@ class MlofcNode(Node):
         self.stats = {'received': 0, 'processed': 0, 'dropped': 0, 'skipped': 0, 'errors': 0,
                       'unsolved': 0, 'carried': 0, 'late': 0}
         self.last_result: Optional[FrameResult] = None
+        self._focal_state: Optional[str] = None   # focal_state() of the last solved frame
 
         self._pipeline = Pipeline(**{k: values[k] for k in P.names('pipeline')})
 
@@ -352,6 +375,8 @@ class MlofcNode(Node):
             'frames carried from the running fit': stats['carried'],
             'frames skipped': stats['skipped'],
             'errors': stats['errors'],
+            'focal length (px)': f'{r.focal_length:.1f}' if r is not None else 'nan',
+            'focal length': focal_text(r),
             'last problem': problem[1] if problem is not None else 'none',
             'last problem age (s)': f'{now - problem[0]:.1f}' if problem is not None else '',
         }
@@ -500,6 +525,7 @@ class MlofcNode(Node):
         if result.problem:
             self._warn('pipeline', result.problem)
         self.last_result = result           # before publishing: a subscriber may look at it
+        self._log_focal(result)
         if not self._publish_cloud(header, obs, result):
             self._count('late')
         self._publish(header, obs.gray, result, debug)
@@ -518,6 +544,21 @@ class MlofcNode(Node):
             bgr = draw_debug(gray, r.segments, r.labels, r.track_ids, r.angular_velocities,
                              r.body_valid)
             self._debug_pub.publish(debug_image_msg(header, bgr))
+
+    def _log_focal(self, r: FrameResult) -> None:
+        """Log once when the focal length becomes observable or not (estimated only)."""
+        state = focal_state(r)
+        if state is None or state == self._focal_state:
+            return
+        self._focal_state = state
+        spread = f'{r.focal_length:.0f} px +-{100.0 * r.focal_log_sigma:.0f}%'
+        if state == 'not observable':
+            self.get_logger().warning(
+                f'the focal length is not observable from the scene so far ({spread}: a '
+                'still scene, or bodies that do not rotate about the camera); the covariances '
+                'of the twists carry it; give camera_info or focal_length for calibrated rates')
+        elif state == 'estimated':
+            self.get_logger().info(f'focal length estimated from the scene: {spread}')
 
     # --- lifecycle -----------------------------------------------------------------------
 

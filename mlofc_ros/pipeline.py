@@ -40,6 +40,7 @@ from mlofc_ros.frame import (centred_intrinsics, check_image_size, check_lines, 
                              invalid_bodies, lookup, Observation, ray_intrinsics, segment_rays,
                              TIMING_KEYS, unsolved_fields)
 from mlofc_ros.solver import get_method, segment_lines, SegmentationResult
+from mlofc_ros.solver.focal import focal_evidence, FOCAL_PRIOR_LOG_SIGMA, FocalEstimate
 from mlofc_ros.solver.warm import WarmStarts
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
@@ -52,7 +53,8 @@ BLANK_CONTRAST = 2
 #: A body is reported (``body_valid``) only with at least this many tracks in the window: with
 #: fewer (num_bodies above what the scene holds) its fitted motion is mostly noise.
 MIN_BODY_TRACKS = 4
-#: With no calibration, the focal length is fixed to the median of this many window estimates.
+#: With no calibration, the focal length starts at the median of this many window estimates
+#: (each from a solve with f unknown), then is refined from non-overlapping windows.
 FOCAL_SAMPLES = 8
 
 
@@ -89,10 +91,14 @@ class Pipeline:
         self._image_size: Optional[Tuple[int, int]] = None
         self._undistort_camera: Optional[CameraModel] = None
         # focal length estimated from the stream when no calibration is given: a camera
-        # constant, so it is fixed once FOCAL_SAMPLES windows agree (the median) instead of
-        # being re-estimated at every frame (100x the cost of a known-f solve)
+        # constant, so once FOCAL_SAMPLES windows were solved with f unknown (100x the cost of
+        # a known-f solve) their median starts an estimate that the windows of a method with
+        # translations refine at the cost of a profile (solve side); the observing side reads
+        # (f, std of ln f), replaced in one assignment
         self._focal_samples: List[float] = []
-        self._focal_fixed: Optional[float] = None
+        self._focal: Optional[FocalEstimate] = None
+        self._focal_evidence_stamp = -math.inf
+        self._focal_now: Optional[Tuple[float, float]] = None
         # what a solve hands to the next: the solver's warm start besides the labels
         self._warm = WarmStarts()
         # solve-side resets not handed over yet (a tracker failure, a skipped frame's): the
@@ -102,10 +108,11 @@ class Pipeline:
         # 'lines' (the caller's, observe_lines); None until the first frame
         self._source: Optional[str] = None
         # restarts of track or body ids seen by observe (Observation.epoch), and the last
-        # solve's labels by track id for carry(): (epoch, track ids, stable ids, focal length),
-        # replaced in one assignment by the solving thread, read by the observing one
+        # solve's labels by track id for carry(): (epoch, track ids, stable ids, focal length,
+        # its std of ln f), replaced in one assignment by the solving thread, read by the
+        # observing one
         self._epoch = 0
-        self._running: Optional[Tuple[int, np.ndarray, np.ndarray, float]] = None
+        self._running: Optional[Tuple[int, np.ndarray, np.ndarray, float, float]] = None
 
     # --- configuration -------------------------------------------------------------------
 
@@ -162,7 +169,9 @@ class Pipeline:
 
     def _forget_focal(self) -> None:
         self._focal_samples.clear()
-        self._focal_fixed = None
+        self._focal = None
+        self._focal_evidence_stamp = -math.inf
+        self._focal_now = None
 
     def _restart_window(self) -> None:
         self._window.reset()
@@ -206,17 +215,22 @@ class Pipeline:
 
     def _intrinsics(self, camera: Optional[CameraModel], size: Tuple[int, int]
                     ) -> Tuple[Optional[Tuple[float, float, float, float]],
-                               Optional[CameraModel]]:
-        """Solver intrinsics (None = estimate f) and the camera to undistort with (or None)."""
+                               Optional[CameraModel], float]:
+        """
+        Return the solver intrinsics, the camera to undistort with, and the spread of ``ln f``.
+
+        Intrinsics None: estimate f; camera None: no distortion; the standard deviation of
+        ``ln f`` is 0 for a given focal length, NaN for intrinsics None.
+        """
         f = float(self.params['focal_length'])
         if f > 0:
-            return centred_intrinsics(f, size), None
+            return centred_intrinsics(f, size), None, 0.0
         if camera is None:
-            if self._focal_fixed is None:
-                return None, None
-            f = self._focal_fixed
-            return centred_intrinsics(f, size), None
-        return camera.intrinsics, (camera if camera.has_distortion else None)
+            now = self._focal_now
+            if now is None:
+                return None, None, math.nan
+            return centred_intrinsics(now[0], size), None, now[1]
+        return camera.intrinsics, (camera if camera.has_distortion else None), 0.0
 
     def _empty(self, stamp: float, problem: Optional[str], skipped: bool, fill: int
                ) -> FrameResult:
@@ -343,7 +357,7 @@ class Pipeline:
             self._pending_resets |= resets     # for the next observation to carry
             return Observation.skip(stamp, gray, f'duplicate stamp {stamp:.9f} s; frame '
                                     'skipped', self.window_fill)
-        intrinsics, undistort_cam = self._intrinsics(cam, size)
+        intrinsics, undistort_cam, focal_log_sigma = self._intrinsics(cam, size)
         if undistort_cam != self._undistort_camera:
             self._restart_window()        # stored endpoints were corrected with another model
             self._undistort_camera = undistort_cam
@@ -365,6 +379,7 @@ class Pipeline:
             self._epoch += 1
         return Observation(stamp=stamp, gray=gray, segments=segments, track_ids=track_ids,
                            win_ids=win_ids, win_tracks=win_tracks, intrinsics=intrinsics,
+                           focal_log_sigma=focal_log_sigma,
                            image_size=size, window_fill=len(self._stamps),
                            frame_interval=self._frame_interval(), blank=blank,
                            problems=problems, timings=timings, resets=frozenset(resets),
@@ -381,7 +396,7 @@ class Pipeline:
             self._restart_tracks()
             resets |= {'tracks', 'focal'}
             self._intervals.clear()
-            self._focal_fixed = None    # the solve side forgets its samples (resets)
+            self._focal_now = None      # the solve side forgets its estimate (resets)
         self._image_size = size
 
     def _check_stamp(self, stamp: float, problems: List[str], resets: Set[str],
@@ -490,7 +505,8 @@ class Pipeline:
         t = time.perf_counter()
         res = self._segment(obs, problems)
         timings['solve'] = (time.perf_counter() - t) * 1e3
-        out = unsolved_fields(obs, self.n_bodies) if res is None else self._publish(obs, res)
+        out = (unsolved_fields(obs, self.n_bodies) if res is None
+               else self._publish(obs, res, problems))
         rays = segment_rays(obs.segments if obs.undistorted is None else obs.undistorted,
                             ray_intrinsics(obs, out.get('focal_length', math.nan)))
         timings['total'] = obs.elapsed_ms + (time.perf_counter() - t0) * 1e3
@@ -515,13 +531,13 @@ class Pipeline:
         t0 = time.perf_counter()
         running = self._running
         fields = unsolved_fields(obs, self.n_bodies)
-        focal = math.nan                                 # the last solve's estimate, if any
+        focal = focal_log_sigma = math.nan             # the last solve's estimate, if any
         if running is not None and running[0] == obs.epoch and not obs.skipped:
             labels = lookup(obs.track_ids, running[1], running[2], -1).astype(np.int32)
             fields.update(labels=labels, carried=labels >= 0)
-            focal = running[3]
+            focal, focal_log_sigma = running[3], running[4]
         if obs.intrinsics is not None:
-            focal = float(obs.intrinsics[0])
+            focal, focal_log_sigma = float(obs.intrinsics[0]), obs.focal_log_sigma
         rays = segment_rays(obs.segments if obs.undistorted is None else obs.undistorted,
                             ray_intrinsics(obs, focal))
         timings = dict(obs.timings)
@@ -529,6 +545,7 @@ class Pipeline:
         return FrameResult(
             stamp=obs.stamp, segments=obs.segments, track_ids=obs.track_ids, timings=timings,
             window_fill=obs.window_fill, problem=None, focal_length=focal,
+            focal_log_sigma=focal_log_sigma,
             frame_interval=obs.frame_interval, n_tracks=int(len(obs.win_ids)), rays=rays,
             skipped=obs.skipped, **fields)
 
@@ -572,7 +589,8 @@ class Pipeline:
         self._warm.solved(method, res)
         return res
 
-    def _publish(self, obs: Observation, res: SegmentationResult) -> Dict[str, Any]:
+    def _publish(self, obs: Observation, res: SegmentationResult, problems: List[str]
+                 ) -> Dict[str, Any]:
         """
         Return the per-segment and per-body fields of a solved frame, by stable body id.
 
@@ -598,18 +616,22 @@ class Pipeline:
         mapping = self.bodies.update(obs.win_ids, res.labels, omega, valid, positions=mid)
         n_out = max(self.n_bodies, int(mapping.max()) + 1 if mapping.size else 0)
         w_out, c_out, v_out = invalid_bodies(n_out)
+        focal_log_sigma = (FOCAL_PRIOR_LOG_SIGMA if obs.intrinsics is None
+                           else obs.focal_log_sigma)
         w_out[mapping] = published
-        c_out[mapping] = cov
+        c_out[mapping] = cov + focal_covariance(published, focal_log_sigma)
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)
         labels, carried = self._segment_labels(obs, res.labels, mapping)
-        self._running = (obs.epoch, np.array(obs.track_ids), labels, float(res.focal_length))
-        self._sample_focal(obs, float(res.focal_length))
+        self._running = (obs.epoch, np.array(obs.track_ids), labels, float(res.focal_length),
+                         focal_log_sigma)
+        self._refine_focal(obs, res, problems)
         residuals = lookup(obs.track_ids, obs.win_ids,
                            np.asarray(res.residuals, dtype=np.float32), np.nan)
         return {'labels': labels, 'residuals': residuals.astype(np.float32),
                 'angular_velocities': w_out, 'angular_covariances': c_out, 'body_valid': v_out,
-                'carried': carried, 'focal_length': float(res.focal_length)}
+                'carried': carried, 'focal_length': float(res.focal_length),
+                'focal_log_sigma': focal_log_sigma}
 
     def _segment_labels(self, obs: Observation, labels: np.ndarray, mapping: np.ndarray
                         ) -> Tuple[np.ndarray, np.ndarray]:
@@ -629,12 +651,63 @@ class Pipeline:
             out = np.where(carried, old, out).astype(np.int32)
         return out, carried
 
-    def _sample_focal(self, obs: Observation, focal: float) -> None:
-        """Collect an estimated focal length; fix the median of :data:`FOCAL_SAMPLES` of them."""
+    def _refine_focal(self, obs: Observation, res: SegmentationResult,
+                      problems: List[str]) -> None:
+        """
+        Refine the focal length of an uncalibrated stream with a solved window.
+
+        A solve with f unknown gives a sample; the median of :data:`FOCAL_SAMPLES` of them
+        starts the running estimate (:class:`FocalEstimate`). A solve at the estimate gives
+        the estimate the evidence of its window (:func:`focal_evidence`, the solve's labels
+        held) when the window is full and shares no frame with the last window that did, and
+        when its model has translations (``general``): only then does its noise tell the
+        bodies that rotate about the camera from those that translate (whose evidence would
+        be biased). A rotation-only method's estimate stays at its start, not observable.
+        """
         # not from an image of another size than the tracker's now: solved late (the node's
-        # solver worker) it would fix f for the new size
-        if (obs.intrinsics is None and math.isfinite(focal) and focal > 0
-                and obs.image_size == self._image_size):
-            self._focal_samples.append(focal)
-            if len(self._focal_samples) >= FOCAL_SAMPLES:
-                self._focal_fixed = float(np.median(self._focal_samples))
+        # solver worker) it would estimate f for the new size
+        if obs.image_size != self._image_size or (obs.intrinsics is not None
+                                                  and obs.focal_log_sigma == 0.0):
+            return
+        focal = float(res.focal_length)
+        if obs.intrinsics is None:
+            if math.isfinite(focal) and focal > 0 and self._focal is None:
+                self._focal_samples.append(focal)
+                if len(self._focal_samples) >= FOCAL_SAMPLES:
+                    self._focal = FocalEstimate(float(np.median(self._focal_samples)))
+                    self._focal_evidence_stamp = obs.stamp
+                    self._focal_now = (self._focal.focal, self._focal.log_sigma)
+            return
+        span = (obs.window_fill - 0.5) * obs.frame_interval
+        if (self._focal is None or obs.window_fill < int(self.params['window'])
+                or res.diagnostics.translation_scales is None
+                or not obs.stamp - self._focal_evidence_stamp >= span):
+            return
+        w, h = obs.image_size
+        try:
+            evidence = focal_evidence(obs.win_tracks, np.asarray(res.labels),
+                                      len(np.asarray(res.angular_velocities).reshape(-1, 3)),
+                                      (w / 2.0, h / 2.0), focal,
+                                      noise_var=res.diagnostics.sigma_px ** 2)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            problems.append(f'focal length not refined: {exc}')
+            return
+        self._focal_evidence_stamp = obs.stamp
+        self._focal.add(evidence)
+        self._focal_now = (self._focal.focal, self._focal.log_sigma)
+
+
+def focal_covariance(angular_velocities: np.ndarray, focal_log_sigma: float) -> np.ndarray:
+    """
+    Covariance ``(n, 3, 3)`` the focal length's uncertainty adds to angular velocities ``(n, 3)``.
+
+    The image-plane components scale as ``1 / f`` to first order (a rotation about x or y
+    moves the image by ``f w``; about z by nothing that depends on f), so
+    ``d w / d ln f = -(w_x, w_y, 0)``. Zero for a given focal length; NaN rows stay NaN.
+    """
+    w = np.asarray(angular_velocities, dtype=float).reshape(-1, 3)
+    if not focal_log_sigma > 0:
+        return np.zeros((len(w), 3, 3))
+    jac = np.zeros_like(w)
+    jac[:, :2] = -w[:, :2]
+    return focal_log_sigma ** 2 * jac[:, :, None] * jac[:, None, :]

@@ -260,6 +260,9 @@ def test_bad_camera_info_is_warned_once_per_change_and_replaced(harness):
     h.frame(image_msg(seq.frames[2], seq.stamps[2]))
     f = h.mlofc.last_result.focal_length
     assert math.isfinite(f) and f > 0 and f != cam.fx
+    # one window's estimate: not observable yet, said once in the log
+    assert not h.mlofc.last_result.focal_observable
+    assert h.wait(lambda: h.warnings('focal length is not observable'), 10.0)
     # ... or focal_length used when set (and the warning says so)
     assert h.set_params(focal_length=250.0)[0].successful
     publish_info(camera_info(cam, k=[math.nan] * 9))
@@ -272,6 +275,7 @@ def test_bad_camera_info_is_warned_once_per_change_and_replaced(harness):
     assert h.wait(lambda: h.infos('camera_info is usable again'), 10.0)
     h.frame(image_msg(seq.frames[4], seq.stamps[4]))
     assert h.mlofc.last_result.focal_length == cam.fx
+    assert len(h.warnings('focal length is not observable')) == 1
     h.accounting()
 
 
@@ -416,6 +420,7 @@ def test_queue_drops_are_counted_and_diagnostics_report_at_1hz(harness):
                 'frames processed', 'frames dropped', 'last problem'):
         assert key in kv, kv
     assert int(kv['frames processed']) == 3 and int(kv['tracked lines']) > 20
+    assert kv['focal length'] == 'given' and kv['focal length (px)'] == '300.0'
     assert kv['window fill'] == '3/5' and kv['last problem'] == 'none'
     # 1 Hz: consecutive messages of this node about a second apart
     n = len(diag)

@@ -20,9 +20,11 @@ import math
 from typing import Dict, List, Sequence
 
 from mlofc_ros.bodies import assign, BodyTracker, relabel
-from mlofc_ros.pipeline import FOCAL_SAMPLES, FrameResult, Pipeline, TIMING_KEYS
+from mlofc_ros.pipeline import (focal_covariance, FOCAL_SAMPLES, FrameResult, Pipeline,
+                                TIMING_KEYS)
 from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import segment_lines
+from mlofc_ros.solver.focal import FOCAL_PRIOR_LOG_SIGMA
 from mlofc_ros.solver.warm import WARM_FLOOR_MARGIN, WARM_FLOOR_SOLVES
 from mlofc_ros.tracks.undistort import undistort_segments
 from mlofc_tools.render import render_sequence
@@ -609,17 +611,41 @@ def test_pipeline_keeps_body_ids_over_a_sequence():
     assert len(set(ids)) == 1, ids
 
 
-def test_estimated_focal_length_is_fixed_after_warm_up():
-    """Without calibration f is a camera constant: estimated over a few windows, then held."""
-    seq = render_sequence(n_boxes=2, n_frames=22, size=(320, 240), motion='camera_centre',
+def test_estimated_focal_length_is_refined_online():
+    """
+    Refine an uncalibrated focal length window after window, narrowing its spread.
+
+    It starts at the median of a few windows' estimates, then every window that shares no
+    frame with the last one refines it (no freeze) when the method has translations to tell
+    the bodies that rotate about the camera from the others (``general``); a rotation-only
+    method cannot, its estimate stays at the start, not observable.
+    """
+    seq = render_sequence(n_boxes=2, n_frames=30, size=(320, 240), motion='camera_centre',
                           background=True, noise_sigma=1.0, seed=3)
-    p = Pipeline(num_bodies=3, window=4)
+    rotation_only = run(Pipeline(num_bodies=3, window=4), seq, camera=None)
+    assert {r.focal_length for r in rotation_only[FOCAL_SAMPLES + 2:]} == {
+        rotation_only[-1].focal_length}
+    assert not rotation_only[-1].focal_observable
+    p = Pipeline(num_bodies=3, window=4, method='general')
     out = run(p, seq, camera=None)
-    focal = [r.focal_length for r in out if math.isfinite(r.focal_length)]
-    assert len(focal) >= FOCAL_SAMPLES + 2
-    held = focal[-1]
-    assert focal[-2] == held                        # fixed: no longer re-estimated
-    assert abs(held - seq.camera.fx) / seq.camera.fx < 0.1
+    solved = [r for r in out if math.isfinite(r.focal_length)]
+    assert len(solved) >= FOCAL_SAMPLES + 10
+    start = solved[FOCAL_SAMPLES]                    # the first solve at the started estimate
+    assert start.focal_log_sigma == pytest.approx(FOCAL_PRIOR_LOG_SIGMA)
+    assert not start.focal_observable
+    later = [r.focal_length for r in solved[FOCAL_SAMPLES:]]
+    assert len(set(later)) >= 4                      # refined, window after window
+    last = solved[-1]
+    assert abs(last.focal_length - seq.camera.fx) / seq.camera.fx < 0.03
+    assert last.focal_observable and 0.0 < last.focal_log_sigma < 0.03
+    # the twists' covariances carry the spread (a factor 2 at the start: the image-plane
+    # components' standard deviations at least 69% of the components)
+    valid = start.body_valid
+    assert valid.any()
+    var = np.diagonal(start.angular_covariances[valid], axis1=1, axis2=2)
+    floor = np.diagonal(focal_covariance(start.angular_velocities[valid], FOCAL_PRIOR_LOG_SIGMA),
+                        axis1=1, axis2=2)
+    assert np.all(var >= floor) and np.all(floor[:, :2] > 0)
     p.reset()
     assert p.observe(seq.frames[0], seq.stamps[0]).intrinsics is None    # forgotten on reset
 

@@ -24,10 +24,18 @@ orthogonal to ``m_p``, the row
 gives ``f^2`` (the paper's eq. 18, made precise); the two ratios are pooled by least squares.
 The first-order estimate is then refined exactly: the profile of the Mahalanobis cost of the
 exact known-f model over ``f`` with the labels fixed.
+
+Online (a stream without calibration): every window gives evidence on ``ln f``, the minimum of
+its profile and the profile's curvature there (:func:`focal_evidence`), and
+:class:`FocalEstimate` combines the windows' evidence with a broad prior (inverse-variance
+weights, inflated when the windows disagree beyond their own spread).
 """
+from collections import deque
+from dataclasses import dataclass
 from functools import lru_cache
+import math
 from math import comb
-from typing import Callable, Optional, Tuple
+from typing import Callable, Deque, Optional, Tuple
 
 import numpy as np
 
@@ -146,3 +154,188 @@ def refine_focal(cost: Callable[[float], float], f0: float, span: float = 3.0,
             b = lo + phi * (hi - lo)
             fb = cost(float(np.exp(b)))
     return float(np.exp(0.5 * (lo + hi)))
+
+
+#: Standard deviation of ``ln f`` below which the focal length counts as observable (10%).
+FOCAL_OBSERVABLE = 0.1
+#: Windows with evidence an estimate needs to count as observable (below, its spread is at
+#: least twice :data:`FOCAL_OBSERVABLE`): their disagreement (the Birge ratio) means little
+#: with fewer.
+FOCAL_MIN_WINDOWS = 3
+#: Standard deviation of ``ln f`` of the prior (a factor 2): the start value is one window's
+#: estimate, so f stays within a plausible range however little the scene tells.
+FOCAL_PRIOR_LOG_SIGMA = math.log(2.0)
+#: Windows of evidence an estimate keeps: it follows a change of zoom within this many.
+FOCAL_MEMORY = 30
+#: A window's profile is searched over ``f0 / span .. f0 * span`` around the running estimate.
+FOCAL_EVIDENCE_SPAN = 2.0
+#: A body whose rotation-model noise exceeds the solve's model noise by this factor (in
+#: variance; 2x in rms) moves in a way the rotation model does not explain (it translates
+#: relative to the camera): it would bias the profile's minimum, it gives no evidence.
+FOCAL_MISFIT = 4.0
+#: Points of the coarse log grid over ``f0 / span .. f0 * span``.
+_GRID = 13
+#: Step in ``ln f`` of the three-point refinement about each body's grid minimum (5%, well
+#: within a profile's quadratic range).
+_CURVATURE_STEP = 0.05
+
+
+@dataclass(frozen=True)
+class FocalEvidence:
+    """
+    What one window says about the focal length.
+
+    ``focal`` px: the minimum of its cost profile; ``log_sigma``: the standard deviation of
+    ``ln focal`` from the profile's curvature (``inf``: no evidence, a flat profile or a
+    minimum at the searched range's edge).
+    """
+
+    focal: float
+    log_sigma: float
+
+
+def body_profiles(tracks: np.ndarray, labels: np.ndarray, n: int,
+                  centre: Tuple[float, float], focal: np.ndarray
+                  ) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return every body's cost ``(F, n)`` at each focal length ``focal (F,)`` px, rotation refit.
+
+    And the degrees of freedom ``(n,)`` of each body's cost: its rows less a rotation per
+    frame pair. The cost is the Mahalanobis cost (px^2 for 1 px of endpoint noise) of the
+    exact rotation model (:func:`.models.track_costs`), summed over the body's tracks;
+    tracks labelled ``-1`` do not count.
+    """
+    lab = np.asarray(labels)
+    out = np.zeros((len(focal), n))
+    cx, cy = centre
+    rows = np.zeros(n)
+    for i, f in enumerate(np.asarray(focal, dtype=float)):
+        flows = line_flows(tracks, (f, f, cx, cy))
+        c, _ = fit_bodies(flows, lab, n)
+        costs = track_costs(flows, c, weighted=True)
+        idx = np.flatnonzero(lab >= 0)
+        idx = idx[np.isfinite(costs[idx, lab[idx]])]
+        out[i] = np.bincount(lab[idx], weights=costs[idx, lab[idx]], minlength=n)
+        if i == 0:
+            rows = np.bincount(lab[idx], weights=2.0 * flows.pairs_per_track()[idx],
+                               minlength=n)
+    return out, rows - 3.0 * (tracks.shape[1] - 1)
+
+
+def focal_evidence(tracks: np.ndarray, labels: np.ndarray, n: int,
+                   centre: Tuple[float, float], f0: float,
+                   span: float = FOCAL_EVIDENCE_SPAN,
+                   noise_var: Optional[float] = None) -> FocalEvidence:
+    """
+    Return the focal-length evidence of a window, its labels held (the rotation model).
+
+    Parameters
+    ----------
+    tracks : (N, K, 4) float
+        Endpoints px over the window, NaN where unseen.
+    labels : (N,) int
+        Body of every track in ``0..n-1`` (``-1`` does not count).
+    n : int
+        Bodies.
+    centre : (cx, cy)
+        Principal point px.
+    f0 : float
+        Where to search (px): ``f0 / span .. f0 * span``.
+    span : float
+        The searched range's factor, > 1.
+    noise_var : float, optional
+        The endpoint noise variance px^2 of the model that made ``labels`` (the solve's
+        ``sigma_px`` squared); None: no body is left out for its misfit.
+
+    Notes
+    -----
+    Each body's profile ``C_b(f)`` (:func:`body_profiles`) is scanned on a log grid and
+    refined by a parabola through three points 5% apart about its minimum; ``C_b / s_b^2``
+    is a chi-square, with the body's noise ``s_b^2`` estimated from ``C_b`` at the minimum,
+    so the variance of its ``ln f`` is ``2 s_b^2 / C_b''`` (``C''`` over ``ln f``). A body
+    without rotation about the camera (a still background) has a flat profile, a body whose
+    minimum is at the grid's edge bounds f on one side only: no evidence from either. A
+    body that translates relative to the camera biases its minimum (the rotation model does
+    not explain its flow): one whose noise exceeds ``noise_var`` by more than
+    :data:`FOCAL_MISFIT` is left out. The bodies' estimates are combined with inverse-variance
+    weights, the variance multiplied by their Birge ratio when they disagree beyond their
+    spread. Bodies that translate alike under a model that cannot tell (``robust``: its own
+    noise is the rotation model's) go unseen: a bias left over shows only as disagreement
+    between windows, which widens the combined spread (:class:`FocalEstimate`).
+
+    """
+    lab = np.asarray(labels)
+    grid = math.log(f0) + np.linspace(-math.log(span), math.log(span), _GRID)
+    costs, dof = body_profiles(tracks, lab, n, centre, np.exp(grid))
+    k = np.argmin(costs, axis=0)
+    h = _CURVATURE_STEP
+    xs, variances = [], []
+    for b in np.flatnonzero((k > 0) & (k < _GRID - 1) & (dof > 0)):
+        x = grid[k[b]]
+        c_lo, c_mid, c_hi = body_profiles(tracks, lab, n, centre,
+                                          np.exp(x + np.array([-h, 0.0, h])))[0][:, b]
+        curvature = (c_lo - 2.0 * c_mid + c_hi) / h ** 2
+        noise = c_mid / dof[b]
+        if not (curvature > 0 and c_mid > 0) or (
+                noise_var is not None and noise_var > 0 and noise > FOCAL_MISFIT * noise_var):
+            continue
+        xs.append(x + float(np.clip((c_lo - c_hi) / (2.0 * h * curvature), -2 * h, 2 * h)))
+        variances.append(2.0 * noise / curvature)
+    if not xs:
+        return FocalEvidence(f0, math.inf)
+    x, w = np.array(xs), 1.0 / np.array(variances)
+    mean = float(w @ x / w.sum())
+    var = 1.0 / float(w.sum())
+    if len(x) >= 2:
+        var *= max(1.0, float(w @ (x - mean) ** 2) / (len(x) - 1))
+    return FocalEvidence(math.exp(mean), math.sqrt(var))
+
+
+class FocalEstimate:
+    """
+    The focal length of an uncalibrated stream, refined as windows come (not thread-safe).
+
+    A prior ``N(ln f_start, prior_log_sigma^2)`` and the evidence of the last ``memory``
+    windows (:func:`focal_evidence`, windows that do not overlap: overlapping ones would
+    count the same frames twice), combined in ``ln f`` with inverse-variance weights. When the
+    windows disagree beyond their own spread (the Birge ratio ``r^2`` of their chi-square over
+    ``k - 1`` degrees of freedom exceeds 1: bodies that translate, wrong labels) the combined
+    variance is multiplied by ``r^2``; it never exceeds the prior's, and stays at least
+    twice :data:`FOCAL_OBSERVABLE` until :data:`FOCAL_MIN_WINDOWS` windows gave evidence.
+    """
+
+    def __init__(self, f_start: float, prior_log_sigma: float = FOCAL_PRIOR_LOG_SIGMA,
+                 memory: int = FOCAL_MEMORY) -> None:
+        if not (math.isfinite(f_start) and f_start > 0):
+            raise ValueError(f'f_start must be a finite focal length > 0 px, got {f_start}')
+        self._prior = (math.log(f_start), prior_log_sigma)
+        self._evidence: Deque[FocalEvidence] = deque(maxlen=memory)
+        self.focal, self.log_sigma = f_start, prior_log_sigma
+
+    @property
+    def observable(self) -> bool:
+        """Return whether the focal length is known within :data:`FOCAL_OBSERVABLE`."""
+        return self.log_sigma <= FOCAL_OBSERVABLE
+
+    @property
+    def n_windows(self) -> int:
+        """Windows with evidence (finite spread) among those kept."""
+        return sum(math.isfinite(e.log_sigma) for e in self._evidence)
+
+    def add(self, evidence: FocalEvidence) -> None:
+        """Take one window's evidence and update :attr:`focal` (px) and :attr:`log_sigma`."""
+        self._evidence.append(evidence)
+        x0, s0 = self._prior
+        ev = [e for e in self._evidence if math.isfinite(e.log_sigma) and e.log_sigma > 0]
+        x = np.array([math.log(e.focal) for e in ev])
+        w = np.array([e.log_sigma ** -2 for e in ev])
+        weight = s0 ** -2 + float(w.sum())
+        mean = (x0 * s0 ** -2 + float(w @ x)) / weight
+        var = 1.0 / weight
+        if len(ev) >= 2:
+            birge = float(w @ (x - mean) ** 2) / (len(ev) - 1)
+            var *= max(1.0, birge)
+        self.focal = math.exp(mean)
+        self.log_sigma = min(math.sqrt(var), s0)
+        if len(ev) < FOCAL_MIN_WINDOWS:         # too few windows to check each other
+            self.log_sigma = max(self.log_sigma, 2.0 * FOCAL_OBSERVABLE)

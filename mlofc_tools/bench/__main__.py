@@ -29,6 +29,7 @@ BENCHMARKS = {
     'soak': 'resident memory over a long run of the pipeline (10,000 frames)',
     'spinning': 'boxes spinning about their own centres through the pipeline: robust vs general',
     'real': 'visp_cube (real, no ground truth) scored by a motion proxy: robust vs general',
+    'focal': 'the focal length estimated online without calibration: general vs robust',
     'tradeoff': 'speed vs tracking quality over detector_scale, detect_every, bridge_crossings',
 }
 

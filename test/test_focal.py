@@ -1,0 +1,99 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The focal length of an uncalibrated stream: one window's evidence, the running estimate."""
+import math
+
+from mlofc_ros.pipeline import focal_covariance
+from mlofc_ros.solver import segment_lines
+from mlofc_ros.solver.focal import (focal_evidence, FOCAL_OBSERVABLE, FOCAL_PRIOR_LOG_SIGMA,
+                                    FocalEstimate, FocalEvidence)
+from mlofc_tools.synthetic import make_scene
+import numpy as np
+import pytest
+
+F_TRUE = 550.0
+SIZE = (640, 480)
+CENTRE = (320.0, 240.0)
+
+
+def scene(seed: int, **kwargs):
+    args = {'n_frames': 10, 'noise_px': 1.0, 'image_size': SIZE, 'focal_length': F_TRUE,
+            'seed': seed, 'rotation_deg': (0.3, 1.5)}
+    args.update(kwargs)
+    return make_scene(2, 60, **args)
+
+
+def test_window_evidence_is_calibrated_on_rotating_bodies():
+    """The profile's curvature gives the spread of ln f: z-scores of unit size over seeds."""
+    z = []
+    for seed in range(12):
+        sc = scene(seed)
+        ev = focal_evidence(sc.tracks, sc.labels, 2, CENTRE, 700.0, noise_var=1.0)
+        assert 0.0 < ev.log_sigma < 0.05
+        z.append(math.log(ev.focal / F_TRUE) / ev.log_sigma)
+    rms = float(np.sqrt(np.mean(np.square(z))))
+    assert 0.6 < rms < 1.6, z
+
+
+def test_still_or_translating_windows_give_no_evidence():
+    still = scene(1, rotation_deg=(0.0, 0.0))
+    assert math.isinf(focal_evidence(still.tracks, still.labels, 2, CENTRE, 600.0).log_sigma)
+    # bodies translating fast: the rotation model leaves 2x the noise the general model does
+    moving = scene(2, translation_ratio=5.0)
+    ev = focal_evidence(moving.tracks, moving.labels, 2, CENTRE, 600.0, noise_var=1.0)
+    assert math.isinf(ev.log_sigma)
+    assert math.isfinite(focal_evidence(moving.tracks, moving.labels, 2, CENTRE,
+                                        600.0).log_sigma)        # its own noise: no test
+
+
+def test_running_estimate_combines_windows_and_widens_when_they_disagree():
+    est = FocalEstimate(800.0)
+    assert est.focal == 800.0 and est.log_sigma == FOCAL_PRIOR_LOG_SIGMA
+    assert not est.observable
+    est.add(FocalEvidence(560.0, math.inf))                      # no evidence: no change
+    assert est.focal == pytest.approx(800.0) and est.n_windows == 0
+    for f in (545.0, 555.0, 550.0, 548.0):
+        est.add(FocalEvidence(f, 0.02))
+    assert est.focal == pytest.approx(550.0, rel=0.01)
+    assert est.log_sigma == pytest.approx(0.01, rel=0.05)        # 0.02 / sqrt(4)
+    assert est.observable and est.log_sigma <= FOCAL_OBSERVABLE
+    # windows that disagree far beyond their own spread: the spread grows (Birge ratio)
+    for f in (300.0, 900.0, 420.0):
+        est.add(FocalEvidence(f, 0.02))
+    assert 0.1 < est.log_sigma <= FOCAL_PRIOR_LOG_SIGMA and not est.observable
+    # old windows are forgotten (memory): consistent windows bring it back
+    short = FocalEstimate(800.0, memory=3)
+    for f in (300.0, 900.0, 550.0, 551.0, 549.0):
+        short.add(FocalEvidence(f, 0.02))
+    assert short.focal == pytest.approx(550.0, rel=0.01) and short.observable
+    with pytest.raises(ValueError, match='f_start'):
+        FocalEstimate(math.nan)
+
+
+def test_focal_covariance_is_the_first_order_change_of_the_rotation():
+    """The change ``d w / d ln f = -(w_x, w_y, 0)``, checked with solves at two f."""
+    sc = scene(4, rotation_deg=(2.0, 3.0), noise_px=0.0)
+    eps = 0.02
+    w0, w1 = (segment_lines(sc.tracks, 2, intrinsics=(f, f) + CENTRE, method='robust',
+                            seed=0).angular_velocities for f in (F_TRUE, F_TRUE * math.exp(eps)))
+    if np.linalg.norm(w1 - w0) > np.linalg.norm(w1[::-1] - w0):   # the bodies' order
+        w1 = w1[::-1]
+    changed = (w1 - w0) / eps
+    expected = np.zeros_like(w0)
+    expected[:, :2] = -w0[:, :2]
+    assert np.allclose(changed, expected, atol=0.1 * np.abs(w0).max()), (changed, expected)
+    cov = focal_covariance(w0, 0.1)
+    assert np.allclose(cov, 0.01 * expected[:, :, None] * expected[:, None, :])
+    assert not focal_covariance(w0, 0.0).any() and not focal_covariance(w0, math.nan).any()
