@@ -28,7 +28,7 @@ image, is usually body 0; body ``i`` keeps its id while it is seen.
 import functools
 import itertools
 import math
-from typing import Dict, Optional, Tuple
+from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -153,7 +153,9 @@ class BodyTracker:
     def update(self, track_ids: np.ndarray, labels: np.ndarray,
                angular_velocities: np.ndarray,
                valid: Optional[np.ndarray] = None,
-               positions: Optional[np.ndarray] = None) -> np.ndarray:
+               positions: Optional[np.ndarray] = None,
+               new: Sequence[int] = (),
+               keeps: Optional[Dict[int, int]] = None) -> np.ndarray:
         """
         Match this window's bodies to the stable ones and remember the result.
 
@@ -171,6 +173,12 @@ class BodyTracker:
             Image position (px) of every track, e.g. its midpoint. When given, the first window
             numbers bodies by decreasing spatial spread of their tracks (the background spans
             the image, objects do not); otherwise by decreasing track count.
+        new : sequence of int
+            Solver bodies known to be new (the automatic count found one more): each gets an
+            id never used before, whatever its tracks' histories (they were on another body).
+        keeps : dict of int to int, optional
+            ``{solver body: stable id}`` known to continue that id (two bodies merged, the
+            older id kept): the pair's score gains 1, a whole history.
 
         Returns
         -------
@@ -197,7 +205,17 @@ class BodyTracker:
             mapping = np.empty(n, dtype=np.int64)
             mapping[order] = np.arange(n)
         else:
-            mapping = assign(self._score(ids, lab, w, valid, n)).astype(np.int64)
+            score = self._score(ids, lab, w, valid, n)
+            for body, stable in (keeps or {}).items():
+                if 0 <= body < n and 0 <= stable < score.shape[1]:
+                    score[body, stable] += 1.0
+            fresh = np.zeros(n, dtype=bool)
+            fresh[[b for b in new if 0 <= b < n]] = True
+            mapping = np.empty(n, dtype=np.int64)
+            mapping[~fresh] = assign(score[~fresh])
+            # fresh ids: beyond every id in use or ever used
+            mapping[fresh] = max(self.n_slots, int(mapping[~fresh].max(initial=-1)) + 1) \
+                + np.arange(int(fresh.sum()))
         self._remember(ids, lab, w, valid, mapping)
         return mapping
 

@@ -31,11 +31,12 @@ from collections import deque
 import math
 import statistics
 import time
-from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Set, Tuple
+from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Sequence, Set, Tuple
 
 from mlofc_ros import params as _params
 from mlofc_ros.bodies import BodyTracker, relabel
 from mlofc_ros.camera import as_camera, CameraLike, CameraModel
+from mlofc_ros.counting import BodyCount, compact_labels
 from mlofc_ros.frame import (centred_intrinsics, check_image_size, check_lines, FrameResult,
                              invalid_bodies, lookup, Observation, ray_intrinsics, segment_rays,
                              TIMING_KEYS, unsolved_fields)
@@ -101,6 +102,10 @@ class Pipeline:
         self._focal_now: Optional[Tuple[float, float]] = None
         # what a solve hands to the next: the solver's warm start besides the labels
         self._warm = WarmStarts()
+        # num_bodies=0: the current count, and the stable id of each of its bodies (solver
+        # order) from the last solve
+        self._count = BodyCount()
+        self._counted_ids: Optional[np.ndarray] = None
         # solve-side resets not handed over yet (a tracker failure, a skipped frame's): the
         # next observation carries them
         self._pending_resets: Set[str] = set()
@@ -143,8 +148,7 @@ class Pipeline:
             self._window = TrackWindow(self.params['window'])
             self._stamps = deque(maxlen=self.params['window'])
         if 'num_bodies' in changed:
-            self.bodies.reset()
-            self._warm.reset()
+            self._reset_bodies()
         if changed & {'num_bodies', 'min_segment_length'}:
             self._running = None
 
@@ -157,8 +161,7 @@ class Pipeline:
         """
         self._tracker.reset()
         self._restart_window()
-        self.bodies.reset()
-        self._warm.reset()
+        self._reset_bodies()
         self._intervals.clear()
         self._last_stamp = None
         self._image_size = None
@@ -166,6 +169,13 @@ class Pipeline:
         self._pending_resets = set()
         self._source = None
         self._running = None
+
+    def _reset_bodies(self) -> None:
+        """Restart body numbering: stable ids, warm starts, the automatic count."""
+        self.bodies.reset()
+        self._warm.reset()
+        self._count.reset()
+        self._counted_ids = None
 
     def _forget_focal(self) -> None:
         self._focal_samples.clear()
@@ -554,8 +564,7 @@ class Pipeline:
         if 'tracks' in resets:
             self.bodies.forget_tracks()     # the tracker restarted and may reuse track ids
         if 'bodies' in resets:
-            self.bodies.reset()
-            self._warm.reset()
+            self._reset_bodies()
         if 'focal' in resets:
             self._forget_focal()
 
@@ -574,12 +583,30 @@ class Pipeline:
         n_req = int(self.params['num_bodies'])
         method = get_method(self.params['method']).for_window(obs.window_fill,
                                                               int(self.params['window']))
-        previous = self.bodies.previous_labels(obs.win_ids) if n_req > 0 else None
+
+        def solve(n: int, labels: Optional[np.ndarray],
+                  ids: Optional[Sequence[int]] = None) -> SegmentationResult:
+            return segment_lines(obs.win_tracks, n, intrinsics=obs.intrinsics,
+                                 image_size=obs.image_size, method=method.name,
+                                 seed=int(self.params['seed']),
+                                 **self._warm.keywords(method, labels, n, ids))
+
+        def counted(n: int, labels: Optional[np.ndarray],
+                    bodies: Optional[Sequence[int]]) -> SegmentationResult:
+            # the count's bodies by index into the current ones: their stable ids
+            ids = (None if bodies is None
+                   else [int(self._counted_ids[b]) if b >= 0 else -1 for b in bodies])
+            return solve(n, labels, ids)
+
         try:
-            res = segment_lines(obs.win_tracks, n_req, intrinsics=obs.intrinsics,
-                                image_size=obs.image_size, method=method.name,
-                                seed=int(self.params['seed']),
-                                **self._warm.keywords(method, previous, n_req))
+            if n_req > 0:
+                res = solve(n_req, self.bodies.previous_labels(obs.win_ids))
+            else:
+                previous = None
+                if self._counted_ids is not None and len(self._counted_ids) == self._count.n:
+                    previous = compact_labels(self.bodies.previous_labels(obs.win_ids),
+                                              self._counted_ids)
+                res = self._count.solve(obs.win_tracks, previous, counted)
         except (ValueError, NotImplementedError) as exc:
             problems.append(f'solver: {exc}')
             return None
@@ -613,7 +640,20 @@ class Pipeline:
             with np.errstate(invalid='ignore'):
                 mid = np.nanmean(0.5 * (obs.win_tracks[..., :2] + obs.win_tracks[..., 2:]),
                                  axis=1)
-        mapping = self.bodies.update(obs.win_ids, res.labels, omega, valid, positions=mid)
+        new, keeps = (), None
+        counted = int(self.params['num_bodies']) == 0
+        if counted and self._counted_ids is not None:
+            # the count just changed: a new body gets a new id, a merged one the older id
+            if self._count.new_body is not None:
+                new = (self._count.new_body,)
+            if self._count.kept is not None:
+                body, current = self._count.kept
+                keeps = {body: int(self._counted_ids[current])}
+        mapping = self.bodies.update(obs.win_ids, res.labels, omega, valid, positions=mid,
+                                     new=new, keeps=keeps)
+        if counted:
+            # the current bodies in the order of their stable ids: the older first
+            self._counted_ids = np.sort(mapping)
         n_out = max(self.n_bodies, int(mapping.max()) + 1 if mapping.size else 0)
         w_out, c_out, v_out = invalid_bodies(n_out)
         focal_log_sigma = (FOCAL_PRIOR_LOG_SIGMA if obs.intrinsics is None

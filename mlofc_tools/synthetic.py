@@ -400,6 +400,94 @@ def make_scene(n_bodies: int, lines_per_body: Union[int, Sequence[int]], n_frame
                           reference_frame=ref)
 
 
+@dataclass
+class ScheduledScene:
+    """
+    A line stream whose bodies start, stop and leave the view (:func:`scheduled_scene`).
+
+    Attributes
+    ----------
+    tracks : (N, K, 4) float64
+        Noisy endpoints px per line and frame, NaN where the line is out of view.
+    labels : (N,) int64
+        Body of every line (0 = the still background).
+    moving : (n, K) bool
+        Whether each body turns between frame ``k - 1`` and ``k`` (False at ``k = 0``).
+    visible : (n, K) bool
+        Whether each body is in view at frame ``k``.
+    angular_velocities : (n, 3) float64
+        Each body's rotation vector while it moves (rad/frame).
+    intrinsics : tuple of 4 float
+        ``(fx, fy, cx, cy)`` px.
+    image_size : tuple of 2 int
+        ``(width, height)`` px.
+
+    """
+
+    tracks: np.ndarray
+    labels: np.ndarray
+    moving: np.ndarray
+    visible: np.ndarray
+    angular_velocities: np.ndarray
+    intrinsics: Tuple[float, float, float, float]
+    image_size: Tuple[int, int]
+
+
+def scheduled_scene(schedule: Sequence[Tuple[int, int, int]], n_frames: int,
+                    lines_per_body: int = 40, background_lines: int = 120,
+                    noise_px: float = 0.5,
+                    image_size: Tuple[int, int] = (640, 480), focal_length: float = 550.0,
+                    rotation_deg: Tuple[float, float] = (0.5, 1.5),
+                    depth: Tuple[float, float] = (5.0, 8.0), seed: SeedLike = None
+                    ) -> ScheduledScene:
+    """
+    Generate a line stream of a still background and bodies that start, stop and leave.
+
+    Every body of ``schedule`` ``(start, stop, leave)`` rotates about the camera centre
+    (the paper's model) between frames ``start`` and ``stop`` (frame indices; it moves from
+    ``start`` to ``start + 1`` first) at a rotation drawn as :func:`make_scene` does, and is in
+    view from frame 0 up to ``leave`` (exclusive; ``leave >= n_frames``: always), with
+    ``lines_per_body`` lines. Body 0 is a still background of ``background_lines``
+    lines. Lines are sampled in frame 0 (visible in every frame the body is in
+    view), endpoints slide along their lines by up to 10% per frame, Gaussian noise
+    ``noise_px`` on every coordinate.
+    """
+    rng = np.random.default_rng(seed)
+    n = len(schedule) + 1
+    w_img, h_img = int(image_size[0]), int(image_size[1])
+    f = float(focal_length)
+    kmat = np.array([[f, 0.0, w_img / 2.0], [0.0, f, h_img / 2.0], [0.0, 0.0, 1.0]])
+    w, _ = _sample_motions(rng, n, rotation_deg, 0.0, False)
+    w[0] = 0.0
+    moving = np.zeros((n, n_frames), dtype=bool)
+    visible = np.ones((n, n_frames), dtype=bool)
+    for b, (start, stop, leave) in enumerate(schedule, start=1):
+        moving[b, start + 1:stop + 1] = True
+        visible[b, leave:] = False
+    tracks, labels = [], []
+    counts = [background_lines] + [lines_per_body] * (n - 1)
+    for b, count in enumerate(counts):
+        # rotation of frame k relative to frame 0: the steps while the body moves
+        step = rotation_matrices(w[b][None])[0]
+        rots = np.empty((n_frames, 3, 3))
+        rots[0] = np.eye(3)
+        for k in range(1, n_frames):
+            rots[k] = step @ rots[k - 1] if moving[b, k] else rots[k - 1]
+        seen = int(visible[b].sum())
+        pts = _sample_body_lines(rng, count, rots[:seen], np.zeros((seen, 3)), kmat,
+                                 (w_img, h_img), depth, (50.0, 300.0), 0.1)
+        uv = _project(pts, kmat).reshape(count, seen, 4)
+        full = np.full((count, n_frames, 4), np.nan)
+        full[:, :seen] = uv + rng.normal(0.0, float(noise_px), size=uv.shape)
+        tracks.append(full)
+        labels.append(np.full(count, b, dtype=np.int64))
+    order = rng.permutation(sum(counts))
+    return ScheduledScene(tracks=np.concatenate(tracks)[order],
+                          labels=np.concatenate(labels)[order], moving=moving,
+                          visible=visible, angular_velocities=w,
+                          intrinsics=(f, f, w_img / 2.0, h_img / 2.0), image_size=(w_img, h_img))
+
+
 def add_outliers(tracks: np.ndarray, fraction: float, rng: np.random.Generator,
                  mix: str = 'mixed') -> Tuple[np.ndarray, np.ndarray]:
     """

@@ -19,7 +19,7 @@ tracker) and the motions of the last solve into the keywords of
 :func:`mlofc_ros.solver.segment_lines` for the method in use.
 """
 import math
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -79,12 +79,14 @@ class WarmStarts:
         self.noise = math.inf            # the last full solve's noise (px)
         self.full_next = False
 
-    def keywords(self, method: Method, labels: Optional[np.ndarray], n: int) -> Dict[str, Any]:
+    def keywords(self, method: Method, labels: Optional[np.ndarray], n: int,
+                 ids: Optional[Sequence[int]] = None) -> Dict[str, Any]:
         """
         Return the keywords of :func:`segment_lines` for a solve by ``method`` of n bodies.
 
-        ``labels``: the previous stable body id of every track of the window (``-1`` none),
-        None when there is no warm start (``num_bodies`` automatic).
+        ``labels``: the previous body of every track of the window (``-1`` none), None when
+        there is no warm start; stable body ids, or with ``ids`` (the stable id of each of
+        the n solver bodies, ``-1`` for a new one: the automatic count) solver bodies.
         """
         if labels is None or method.warm_start is WarmStart.NONE:
             return {}
@@ -92,9 +94,9 @@ class WarmStarts:
         if method.warm_start is WarmStart.MOTIONS and self.motions:
             w = np.full((n, 3), np.nan)
             t = np.full((n, 3), np.nan)
-            for body, (w_b, t_b) in self.motions.items():
-                if body < n:
-                    w[body], t[body] = w_b, t_b
+            for body, stable in enumerate(range(n) if ids is None else ids):
+                if stable in self.motions:
+                    w[body], t[body] = self.motions[stable]
             out['init_motions'] = (w, t)
             if method.accepts('step') and self.steps >= 0 and not self.full_next:
                 out['step'] = True

@@ -30,6 +30,7 @@ BENCHMARKS = {
     'spinning': 'boxes spinning about their own centres through the pipeline: robust vs general',
     'real': 'visp_cube (real, no ground truth) scored by a motion proxy: robust vs general',
     'focal': 'the focal length estimated online without calibration: general vs robust',
+    'count': 'the number of bodies found online: a line stream that changes, real video',
     'tradeoff': 'speed vs tracking quality over detector_scale, detect_every, bridge_crossings',
 }
 

@@ -1,0 +1,271 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+The number of bodies of a stream, found and changed online (``num_bodies=0``).
+
+A window is first segmented for every count (``segment_lines(n_bodies=0)``: the best BIC,
+:mod:`mlofc_ros.solver.model_selection`); after that every window is solved warm at the
+current count, as with a known count, and the count changes only when a trial solve at one
+body more or one less scores better:
+
+- **one less** (a body stops and joins the still scene, two bodies move alike, a body leaves
+  the view and keeps only a few tracks): tried at every solve for the body with the fewest
+  tracks when it has fewer than the smallest body allowed, else for the pair of bodies whose
+  angular velocities are closest within their covariances (:data:`MERGE_CHI2`), its tracks
+  given to the other (or unlabelled);
+- **one more** (a body starts moving): tried every :data:`BIRTH_EVERY` solves while enough
+  tracks are left unexplained (labelled -1) to make a body, those tracks as the new one.
+
+Both compare the BIC of :func:`~mlofc_ros.solver.model_selection.bic_score` at one noise level,
+the richer model's (so that the poorer cannot hide behind a larger noise), and a change must
+win by :data:`SCORE_MARGIN` (no flicker between two counts that score alike). A trial costs one
+warm solve, so the automatic count costs about 1.2-1.5 known-count solves a frame.
+"""
+from typing import Callable, Optional, Sequence, Tuple
+
+from mlofc_ros.solver import SegmentationResult
+from mlofc_ros.solver.model_selection import (bic_score, MAX_BODIES, MIN_BODY_FRACTION,
+                                              MIN_BODY_LINES)
+import numpy as np
+
+#: Solves between two tries of one more body while tracks stay unexplained.
+BIRTH_EVERY = 5
+#: Solves between two searches for one more (the loose tracks unlabelled) while tracks stay
+#: unexplained, doubled after each that fails up to MAX_SEARCH_WAIT: a search costs 10-30 warm
+#: solves.
+SEARCH_EVERY = 10
+MAX_SEARCH_WAIT = 40
+#: Solves between two tries of one body less while a pair of bodies moves alike.
+MERGE_EVERY = 2
+#: Two bodies whose angular velocities differ by less than this squared Mahalanobis distance
+#: (their two covariances summed) are tried as one. Not a chi-square bound (16.3 at 99.9%):
+#: a still scene split in two is split where the noise makes the halves' rotations differ
+#: most, 4-6 standard deviations apart; distinct motions are hundreds apart.
+MERGE_CHI2 = 100.0
+#: Solves after a change of count during which it does not go back the other way.
+HOLD = 10
+#: A change of count must lower the BIC by this much (about a factor 150 in likelihood).
+SCORE_MARGIN = 10.0
+
+#: ``solve(n, init_labels, bodies)``: a warm solve of the window at ``n`` bodies from labels
+#: in ``0..n-1`` (``-1`` unknown), body ``i`` continuing the current body ``bodies[i]`` (``-1``:
+#: a new one); the automatic count's search when ``n == 0`` (labels and bodies None).
+Solve = Callable[[int, Optional[np.ndarray], Optional[Sequence[int]]], SegmentationResult]
+
+
+def min_body_lines(dof: np.ndarray) -> int:
+    """Return the fewest tracks a body may hold: ``MIN_BODY_LINES``, or 4% of the usable."""
+    return max(MIN_BODY_LINES, int(np.ceil(MIN_BODY_FRACTION * int(np.sum(dof > 0)))))
+
+
+def track_dof(tracks: np.ndarray) -> np.ndarray:
+    """Return the equations ``(N,)`` of every track: 2 per pair of consecutive frames seen."""
+    ok = np.isfinite(np.asarray(tracks)[..., 0])
+    return 2.0 * np.sum(ok[:, :-1] & ok[:, 1:], axis=1)
+
+
+def merge_candidate(res: SegmentationResult, dof: np.ndarray
+                    ) -> Optional[Tuple[np.ndarray, int, int]]:
+    """
+    Return the labels of the count one less worth a try, the body gone and the one kept.
+
+    The body with the fewest tracks when it holds fewer than :func:`min_body_lines` (its
+    tracks unlabelled, none kept: -1), else the pair of bodies closest in angular velocity
+    within :data:`MERGE_CHI2`, the later body's tracks given to the earlier (bodies in the
+    order of their stable ids: the older id is kept, so a body that stops takes the still
+    background's). Labels in ``0..n-2``; None when no body is worth a try.
+    """
+    labels = np.asarray(res.labels)
+    n = res.n_bodies
+    if n < 2:
+        return None
+    counts = np.bincount(labels[labels >= 0], minlength=n)[:n]
+    small = int(np.argmin(counts))
+    if counts[small] < min_body_lines(dof):
+        return _without(labels, small, -1), small, -1
+    w = np.asarray(res.segmentation_angular_velocities, dtype=float).reshape(-1, 3)
+    cov = np.asarray(res.angular_covariances, dtype=float).reshape(-1, 3, 3)
+    best, pair = MERGE_CHI2, None
+    for i in range(n):
+        for j in range(i + 1, n):
+            d = w[i] - w[j]
+            s = cov[i] + cov[j]
+            if not (np.all(np.isfinite(d)) and np.all(np.isfinite(s))):
+                continue
+            try:
+                d2 = float(d @ np.linalg.solve(s, d))
+            except np.linalg.LinAlgError:
+                continue
+            if d2 < best:
+                best, pair = d2, (i, j)
+    if pair is None:
+        return None
+    keep, gone = pair
+    return _without(labels, gone, keep), gone, keep
+
+
+def _without(labels: np.ndarray, gone: int, into: int) -> np.ndarray:
+    """Return ``labels`` with body ``gone`` relabelled ``into`` and the later ones shifted."""
+    out = np.where(labels == gone, into, labels)
+    return np.where(out > gone, out - 1, out)
+
+
+def birth_candidate(res: SegmentationResult, dof: np.ndarray) -> Optional[np.ndarray]:
+    """
+    Return the labels of the count one more worth a try (the unexplained tracks as body n).
+
+    None when fewer usable tracks than :func:`min_body_lines` are unlabelled or the count is
+    at :data:`~mlofc_ros.solver.model_selection.MAX_BODIES`.
+    """
+    labels = np.asarray(res.labels)
+    loose = (labels < 0) & (dof > 0)
+    if res.n_bodies >= MAX_BODIES or int(loose.sum()) < min_body_lines(dof):
+        return None
+    return np.where(loose, res.n_bodies, labels)
+
+
+class BodyCount:
+    """
+    The current number of bodies of a stream and when to try another (not thread-safe).
+
+    :meth:`solve` runs the window's solves through a callback, so that the caller keeps its
+    warm starts and stable ids: ``solve(n, init_labels)`` (see :data:`Solve`).
+    """
+
+    def __init__(self, birth_every: int = BIRTH_EVERY, merge_every: int = MERGE_EVERY) -> None:
+        self.birth_every = int(birth_every)
+        self.merge_every = int(merge_every)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the count: the next window is searched for every count."""
+        self.n = 0
+        self._since_birth = 0
+        self._since_merge = 0
+        # a search for one more that failed waits twice as long as the one before (a real
+        # scene the model explains in part always leaves tracks unexplained), unless more
+        # tracks come loose than at that search (a body starts moving)
+        self._since_search = 0
+        self._search_wait = SEARCH_EVERY
+        # the last change of count and the solves since: for HOLD solves after one, the
+        # count does not go back (a trial that just lost is not tried again at once)
+        self._last: Optional[str] = None
+        self._since_change = 0
+        self._loose_at_failure = 0
+        self.last_change: Optional[str] = None
+        #: After a merge: ``(body of the result, current body it continues)``; after a birth:
+        #: the body of the result that is new. None otherwise.
+        self.kept: Optional[Tuple[int, int]] = None
+        self.new_body: Optional[int] = None
+
+    def solve(self, tracks: np.ndarray, previous: Optional[np.ndarray], solve: Solve
+              ) -> SegmentationResult:
+        """
+        Segment a window, changing the count by one when a trial scores better.
+
+        Parameters
+        ----------
+        tracks : (N, K, 4) float
+            The window's tracks (for their equations).
+        previous : (N,) int or None
+            Every track's body in ``0..n-1`` among the current bodies (``-1`` unknown); None,
+            or no track labelled: the count is searched afresh.
+        solve : Solve
+            Runs the solves.
+
+        :attr:`last_change` tells what happened: ``'search'``, ``'merge'``, ``'birth'`` or
+        None (the count held).
+
+        """
+        self.last_change, self.kept, self.new_body = None, None, None
+        if self.n == 0 or previous is None or not np.any(np.asarray(previous) >= 0):
+            res = solve(0, None, None)
+            self.n, self._since_birth, self.last_change = res.n_bodies, 0, 'search'
+            return res
+        dof = track_dof(tracks)
+        current = list(range(self.n))
+        res = solve(self.n, np.asarray(previous), current)
+        sigma = res.diagnostics.sigma_px
+        sigma = float(sigma) if np.isfinite(sigma) and sigma > 0 else None
+        self._since_merge += 1
+        self._since_change += 1
+        settled = self._since_change >= HOLD
+        merged = (merge_candidate(res, dof) if self._since_merge >= self.merge_every
+                  and (settled or self._last != 'birth') else None)
+        if merged is not None:
+            self._since_merge = 0
+            labels, gone, keep = merged
+            trial = solve(self.n - 1, labels, [b for b in current if b != gone])
+            if bic_score(trial, sigma, dof) < bic_score(res, sigma, dof) - SCORE_MARGIN:
+                self.n, self.last_change = self.n - 1, 'merge'
+                self._last, self._since_change = 'merge', 0
+                if keep >= 0:
+                    self.kept = (_holder(trial.labels, labels == keep), keep)
+                return trial
+        self._since_birth += 1
+        self._since_search += 1
+        born = (birth_candidate(res, dof) if self._since_birth >= self.birth_every
+                and (settled or self._last != 'merge') else None)
+        if born is None:
+            return res
+        self._since_birth = 0
+        loose = born == self.n
+        # first the loose tracks as the new body (a warm solve); then, less often, the loose
+        # tracks unlabelled so that the solver's search finds the new body among them (two
+        # boxes that start together are no one body)
+        proposals = [born]
+        if (self._since_search >= self._search_wait
+                or loose.sum() >= self._loose_at_failure + min_body_lines(dof)):
+            proposals.append(np.where(loose, -1, born))
+        for labels in proposals:
+            trial = solve(self.n + 1, labels, current + [-1])
+            counts = np.bincount(trial.labels[trial.labels >= 0], minlength=trial.n_bodies)
+            richer = trial.diagnostics.sigma_px
+            richer = float(richer) if np.isfinite(richer) and richer > 0 else None
+            if (trial.n_bodies == self.n + 1 and np.all(counts >= min_body_lines(dof))
+                    and bic_score(trial, richer, dof) < bic_score(res, richer, dof)
+                    - SCORE_MARGIN):
+                self.new_body = _holder(trial.labels, loose)
+                self.n, self.last_change = self.n + 1, 'birth'
+                self._last, self._since_change = 'birth', 0
+                self._since_birth = self.birth_every - 1     # another may follow at once
+                self._search_wait, self._loose_at_failure = SEARCH_EVERY, 0
+                return trial
+        if len(proposals) > 1:
+            self._since_search = 0
+            self._search_wait = min(2 * self._search_wait, MAX_SEARCH_WAIT)
+            self._loose_at_failure = int(loose.sum())
+        return res
+
+
+def _holder(labels: np.ndarray, tracks: np.ndarray) -> int:
+    """Return the body holding most of ``tracks`` (a mask) in ``labels`` (-1 when none)."""
+    lab = np.asarray(labels)[tracks]
+    lab = lab[lab >= 0]
+    return int(np.bincount(lab).argmax()) if lab.size else -1
+
+
+def compact_labels(previous: np.ndarray, ids: Sequence[int]) -> np.ndarray:
+    """
+    Return ``previous`` stable ids as indices into ``ids`` (``-1`` for any other id).
+
+    ``previous (N,)``: every track's stable body id (``-1`` none); ``ids``: the stable id of
+    each current body, in solver order.
+    """
+    table = np.asarray(list(ids), dtype=np.int64)
+    prev = np.asarray(previous, dtype=np.int64)
+    out = np.full(prev.shape, -1, dtype=np.int64)
+    for i, sid in enumerate(table):
+        out[prev == sid] = i
+    return out

@@ -1,0 +1,316 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+The number of bodies found online (``num_bodies=0``): a line stream that changes, real video.
+
+Run ``python -m mlofc_tools.bench count``; writes ``README.md``, ``counts.png`` and a picture
+per real sequence to ``docs/results/count/``.
+
+Every stream goes through ``mlofc_ros.pipeline.Pipeline`` frame by frame (stamps at 30
+frames/s) with ``num_bodies=0`` (:mod:`mlofc_ros.counting`) and again with the count given,
+per solver method (``--methods``; ``window`` 5 for ``robust``, the node's default, 10 for
+``general``):
+
+- **scheduled** (:func:`mlofc_tools.synthetic.scheduled_scene`, seeds 0-5): line tracks of a
+  still background (120 lines) and three boxes of 40 lines rotating about the camera centre
+  at 0.2-0.4 deg per frame, 60 frames, 0.5 px noise, f known: box 1 starts moving at frame
+  15, box 2 stops at frame 30, box 3 leaves the view at frame 45. The true count at a frame
+  is the background plus the boxes in view that moved since the frame before. Scored as
+  issue #40 asks: the share of the frames at least 10 frames after the last change with the
+  right count (the bodies solved in the frame with at least ``MIN_BODY_TRACKS`` tracks: the
+  twists the node publishes), and the ids: the background keeps its id,
+  the box that starts gets an id no body had, the box that stops takes the background's,
+  the id of the box that left is not given to another body. The known-count run has
+  ``num_bodies=4`` (the most bodies at any time).
+- **real**: ``visp_cube`` (still until frame 38, then the sheet with the cube and the
+  cylinder dragged by a hand: one body while still, two while it moves), ``rubik_cube`` (the
+  cube turning on a turntable: two) and ``hamburg_taxi`` (three vehicles and the
+  background), calibrated where a camera file exists (``visp_cube``), else f estimated;
+  the known count 2, 2 and 4.
+
+Cost: CPU (``time.thread_time``) of ``Pipeline.process`` per frame from the first full
+window: the automatic count's mean against the known count's on the same frames, and its
+largest frame against its median (issue #40: at most 1.5x and 5x).
+"""
+import argparse
+import os
+import sys
+import time
+from typing import Any, Dict, List, Optional, Sequence
+
+import cv2
+from mlofc_ros.pipeline import FrameResult, Pipeline
+from mlofc_tools.bench import common
+from mlofc_tools.bench.pipeline import read_real_sequence, REAL_DIR
+from mlofc_tools.bench.real import render_strip
+from mlofc_tools.synthetic import scheduled_scene
+import numpy as np
+
+#: Frame rate of the stamps.
+FPS = 30.0
+#: The scheduled stream: ``(start, stop, leave)`` per box (see the module docstring).
+SCHEDULE = [(15, 10 ** 6, 10 ** 6), (0, 30, 10 ** 6), (0, 10 ** 6, 45)]
+FRAMES = 60
+#: Frames where the true count changes (the stream's start counts as one).
+CHANGES = [0, 16, 31, 45]
+#: Frames after a change before the count is scored.
+SETTLE = 10
+#: Window per method (the node's default for ``robust``, the recommended one for ``general``).
+WINDOWS = {'robust': 5, 'general': 10}
+#: Real sequences: name -> (known count, frames shown in the picture).
+REAL = {'visp_cube': (2, (30, 50, 70)), 'rubik_cube': (2, (8, 14, 20)),
+        'hamburg_taxi': (4, (12, 24, 36))}
+
+
+def frame_count(result: FrameResult) -> int:
+    """Return the bodies of a frame: those solved with enough tracks (a twist published)."""
+    return int(np.sum(result.body_valid))
+
+
+def stream_run(seed: int, method: str, num_bodies: int = 0) -> Dict[str, Any]:
+    """
+    Run the scheduled stream of ``seed``; per frame the count, the true one, ids, CPU ms.
+
+    ``ids``: per frame ``{true body: published id held by most of its lines}`` (-1 none).
+    """
+    sc = scheduled_scene(SCHEDULE, FRAMES, seed=seed, rotation_deg=(0.2, 0.4))
+    p = Pipeline(num_bodies=num_bodies, window=WINDOWS.get(method, 5), method=method)
+    track_ids = np.arange(len(sc.tracks))
+    out: Dict[str, Any] = {'count': [], 'want': [], 'ids': [], 'ms': []}
+    for k in range(FRAMES):
+        seen = np.isfinite(sc.tracks[:, k, 0])
+        t = time.thread_time()
+        r = p.process_lines(track_ids[seen], sc.tracks[seen, k], k / FPS, sc.image_size,
+                            camera=sc.intrinsics)
+        out['ms'].append((time.thread_time() - t) * 1e3)
+        out['count'].append(frame_count(r))
+        out['want'].append(1 + int(np.sum(sc.moving[1:, k] & sc.visible[1:, k])))
+        truth = sc.labels[seen]
+        out['ids'].append({b: int(np.bincount(r.labels[truth == b] + 1).argmax()) - 1
+                           for b in range(len(SCHEDULE) + 1) if np.any(truth == b)})
+    return out
+
+
+def score_stream(run: Dict[str, Any]) -> Dict[str, Any]:
+    """Return the share of settled frames with the right count and the id checks."""
+    last = np.array([max(c for c in CHANGES if c <= k) for k in range(FRAMES)])
+    scored = np.arange(FRAMES) - last >= SETTLE
+    right = np.array(run['count']) == np.array(run['want'])
+    ids = run['ids']
+    start, stop, leave = (s[i] for s, i in zip(SCHEDULE, (0, 1, 2)))
+    background = ids[SETTLE][0]
+    before = {i for frame in ids[:start] for i in frame.values()}
+    gone = ids[leave - 1][3]
+    delays = []
+    for c in CHANGES[1:]:
+        ok = np.flatnonzero(right[c:])
+        delays.append(int(ok[0]) if ok.size else None)
+    return {
+        'right': float(right[scored].mean()),
+        'delays': delays,
+        'background_kept': all(f[0] == background for f in ids[SETTLE:]),
+        'new_id_fresh': ids[start + SETTLE][1] not in before,
+        'stopped_joins_background': all(f[2] == background for f in ids[stop + SETTLE:]),
+        'left_id_unused': all(gone not in f.values() for f in ids[leave + 1:]),
+    }
+
+
+def real_run(frames: Sequence[np.ndarray], camera: Any, method: str, num_bodies: int
+             ) -> Dict[str, Any]:
+    """Run a real sequence; per frame the count and CPU ms, and the results by frame."""
+    p = Pipeline(num_bodies=num_bodies, window=WINDOWS.get(method, 5), method=method)
+    out: Dict[str, Any] = {'count': [], 'ms': [], 'results': {}}
+    for k, gray in enumerate(frames):
+        t = time.thread_time()
+        r = p.process(gray, k / FPS, camera=camera)
+        out['ms'].append((time.thread_time() - t) * 1e3)
+        out['count'].append(frame_count(r))
+        out['results'][k] = r
+    return out
+
+
+def cost(auto: Sequence[float], known: Sequence[float], window: int) -> Dict[str, float]:
+    """Return the automatic count's CPU against the known count's, from the window's end."""
+    a, k = np.asarray(auto)[window:], np.asarray(known)[window:]
+    return {'mean_ratio': float(a.mean() / k.mean()),
+            'max_over_median': float(a.max() / np.median(a))}
+
+
+def real_goal(name: str, counts: Sequence[int]) -> str:
+    """Return how a real sequence's counts compare with what it shows (see the docstring)."""
+    c = np.asarray(counts)
+    if name == 'visp_cube':
+        still, moving = c[10:38], c[48:]
+        return (f'one body in {100 * np.mean(still == 1):.0f}% of the still frames 10-37, '
+                f'two in {100 * np.mean(moving == 2):.0f}% of the moving frames 48-79')
+    if name == 'rubik_cube':
+        return f'two bodies in {100 * np.mean(c[5:] == 2):.0f}% of frames 5-20'
+    return (f'{int(np.median(c[10:]))} bodies (median of frames 10-39; the background and '
+            f'{int(np.median(c[10:])) - 1} of the 3 vehicles at most)')
+
+
+def build_report(args: argparse.Namespace, argv: Sequence[str], streams: List[Dict[str, Any]],
+                 reals: List[Dict[str, Any]], seconds: float, revision: Optional[str]) -> str:
+    """Return the Markdown report."""
+    head = common.run_header(
+        'Number of bodies found online', common.command_line('count', argv),
+        {'Pipeline': '`num_bodies=0` against the count given; `window` ' + ', '.join(
+            f'{w} ({m})' for m, w in WINDOWS.items()) + f'; stamps at {FPS:g} frames/s',
+         'Threads': 'single (`cv2.setNumThreads(1)`); CPU ratios within the same run',
+         'Run time': f'{seconds:.0f} s'}, revision)
+    rows = []
+    for s in streams:
+        sc = s['score']
+        rows.append([s['method'], s['seed'], f"{100 * sc['right']:.0f}",
+                     ', '.join('-' if d is None else str(d) for d in sc['delays']),
+                     *('yes' if sc[k] else '**no**' for k in (
+                         'background_kept', 'new_id_fresh', 'stopped_joins_background',
+                         'left_id_unused')),
+                     f"{s['cost']['mean_ratio']:.2f}", f"{s['cost']['max_over_median']:.1f}",
+                     ''.join(map(str, s['count']))])
+    stream_table = common.markdown_table(
+        ['method', 'seed', 'right count % (settled frames)', 'frames to the right count '
+         'after each change', 'background keeps its id', 'new body, new id',
+         'stopped body takes the background id', "left body's id unused",
+         'CPU mean / known count', 'CPU max / median', 'count per frame'], rows)
+    summary = []
+    for method in args.method_list:
+        mine = [s for s in streams if s['method'] == method]
+        if mine:
+            right = [s['score']['right'] for s in mine]
+            summary.append(f'- `{method}`: right count in {100 * np.mean(right):.0f}% of the '
+                           f'settled frames on the mean, {100 * min(right):.0f}% at worst '
+                           '(goal 90%).')
+    real_rows = []
+    for r in reals:
+        real_rows.append([r['method'], r['name'], real_goal(r['name'], r['count']),
+                          f"{r['cost']['mean_ratio']:.2f}", f"{r['cost']['max_over_median']:.1f}",
+                          ''.join(map(str, r['count']))])
+    real_table = common.markdown_table(
+        ['method', 'sequence', 'counts', 'CPU mean / known count', 'CPU max / median',
+         'count per frame'], real_rows)
+    pictures = [f'![{name}]({name}.png)' for name in dict.fromkeys(r['name'] for r in reals)]
+    doc = __doc__.split('\n', 2)[2].strip()
+    return '\n'.join([
+        head, '## Scheduled stream', '', *summary, '', stream_table, '',
+        'Frames to the right count: after the box starts (16), stops (31) and leaves (45).', '',
+        '## Real video', '', real_table, '', '![counts per frame](counts.png)', '',
+        *pictures, '', '## What is measured', '', doc, ''])
+
+
+def plot(streams: List[Dict[str, Any]], reals: List[Dict[str, Any]], path: Any) -> None:
+    """Draw the count per frame: the scheduled streams (with the truth), the real sequences."""
+    names = ['scheduled'] + list(dict.fromkeys(r['name'] for r in reals))
+    fig, axes = common.new_figure(len(names), width_per_panel=3.6, height=3.2)
+    for ax, name in zip(axes, names):
+        runs = streams if name == 'scheduled' else [r for r in reals if r['name'] == name]
+        for i, r in enumerate(runs):
+            label = f"{r['method']} seed {r['seed']}" if name == 'scheduled' else r['method']
+            ax.step(np.arange(len(r['count'])), np.asarray(r['count']) + 0.04 * i,
+                    where='post', color=f'C{i % 10}', linewidth=1, label=label)
+        if name == 'scheduled' and streams:
+            ax.step(np.arange(FRAMES), streams[0]['want'], where='post', color='0.2',
+                    linestyle='--', linewidth=1.4, label='true')
+        ax.set_title(name, fontsize=10)
+        ax.set_xlabel('frame')
+        ax.set_ylabel('bodies')
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=5, loc='best')
+    common.save_figure(fig, path)
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    """
+    Parse the command line of ``python -m mlofc_tools.bench count``.
+
+    Parameters
+    ----------
+    argv
+        The arguments after the benchmark's name.
+
+    """
+    p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench count',
+                                description=__doc__.split('\n')[1])
+    p.add_argument('--real-dir', default=REAL_DIR, help=f'real sequences (default {REAL_DIR})')
+    p.add_argument('--methods', default='robust,general',
+                   help='comma-separated solver methods (robust,general)')
+    p.add_argument('--seeds', default='0,1,2,3,4,5', help='seeds of the scheduled stream')
+    p.add_argument('--quick', action='store_true', help='smoke run: one seed, one method')
+    p.add_argument('--out', default=None, help='output folder (default docs/results/count)')
+    args = p.parse_args(list(argv))
+    args.seed_list = [int(s) for s in args.seeds.split(',') if s]
+    args.method_list = [m for m in args.methods.split(',') if m]
+    if not args.method_list:
+        p.error('--methods names no method')
+    if args.quick:
+        args.seed_list, args.method_list = args.seed_list[:1], args.method_list[:1]
+    return args
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """
+    Run the benchmark; return 0.
+
+    Parameters
+    ----------
+    argv
+        The arguments after the benchmark's name (default ``sys.argv[1:]``).
+
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = parse_args(argv)
+    revision = common.commit()
+    cv2.setNumThreads(1)
+    t0 = time.monotonic()
+    streams, reals = [], []
+    for method in args.method_list:
+        window = WINDOWS.get(method, 5)
+        for seed in args.seed_list:
+            common.eprint(f'count: scheduled, {method}, seed {seed}')
+            run = stream_run(seed, method)
+            known = stream_run(seed, method, num_bodies=4)
+            run.update(method=method, seed=seed, score=score_stream(run),
+                       cost=cost(run['ms'], known['ms'], window))
+            streams.append(run)
+        for name, (n_known, _) in REAL.items():
+            frames, camera = read_real_sequence(os.path.join(args.real_dir, name))
+            if len(frames) < 2 * window:
+                common.eprint(f'count: {name} not found in {args.real_dir}; skipped')
+                continue
+            common.eprint(f'count: {name}, {method}')
+            run = real_run(frames, camera, method, 0)
+            known = real_run(frames, camera, method, n_known)
+            run.update(method=method, name=name, frames=frames, known=known,
+                       cost=cost(run['ms'], known['ms'], window))
+            reals.append(run)
+    out_dir = common.results_dir('count', args.out)
+    plot(streams, reals, out_dir / 'counts.png')
+    for name, (n_known, shown) in REAL.items():
+        mine = [r for r in reals if r['name'] == name]
+        if not mine:
+            continue
+        runs = {}
+        for r in mine:          # one row per method: automatic, then the count given
+            runs[f"{r['method']}, automatic"] = r
+            runs[f"{r['method']}, {n_known} given"] = r['known']
+        strip = render_strip(mine[0]['frames'], runs, shown)
+        if strip is not None:
+            cv2.imwrite(str(out_dir / f'{name}.png'), strip, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    common.write_report('count', args.out, build_report(args, argv, streams, reals,
+                                                        time.monotonic() - t0, revision))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,146 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""The number of bodies found online (``num_bodies=0``): trials, ids, a stream that changes."""
+from typing import List
+
+from mlofc_ros.bodies import BodyTracker
+from mlofc_ros.counting import (birth_candidate, BodyCount, compact_labels, merge_candidate,
+                                MERGE_CHI2, min_body_lines)
+from mlofc_ros.pipeline import Pipeline
+from mlofc_ros.solver import get_method
+from mlofc_ros.solver.result import SegmentationResult
+from mlofc_ros.solver.warm import WarmStarts
+from mlofc_tools.bench import count
+from mlofc_tools.synthetic import scheduled_scene
+import numpy as np
+import pytest
+
+
+def _result(labels, w, sd=1e-4) -> SegmentationResult:
+    w = np.asarray(w, dtype=float)
+    n = len(w)
+    return SegmentationResult(labels=np.asarray(labels), angular_velocities=w,
+                              angular_covariances=np.tile(np.eye(3) * sd ** 2, (n, 1, 1)),
+                              focal_length=500.0, residuals=np.zeros(len(labels)),
+                              costs=np.zeros((len(labels), n)), method='robust')
+
+
+def test_trials_one_less_and_one_more():
+    dof = np.full(100, 8.0)
+    assert min_body_lines(dof) == 4 and min_body_lines(np.full(400, 8.0)) == 16
+    labels = np.repeat([0, 1, 2], [50, 30, 20])
+    # a body below the smallest allowed: its tracks unlabelled, nothing kept
+    tiny = labels.copy()
+    tiny[80:97] = -1
+    got, gone, keep = merge_candidate(_result(tiny, [[0, 0, 0], [0.01, 0, 0], [0, 0.02, 0]]),
+                                      dof)
+    assert (gone, keep) == (2, -1) and set(got[97:]) == {-1} and got.max() == 1
+    # two bodies moving alike (within MERGE_CHI2): the later one joins the earlier
+    alike = _result(labels, [[0.01, 0, 0], [0, 0, 0], [0, 0, 5e-4]])
+    got, gone, keep = merge_candidate(alike, dof)
+    assert (gone, keep) == (2, 1) and np.array_equal(got, np.repeat([0, 1], [50, 50]))
+    assert 5e-4 ** 2 / (2 * 1e-4 ** 2) < MERGE_CHI2
+    # distinct motions: no trial
+    assert merge_candidate(_result(labels, [[0.01, 0, 0], [0, 0, 0], [0, 0.01, 0]]),
+                           dof) is None
+    # one more: the unexplained tracks as body n, when there are enough of them
+    loose = labels.copy()
+    loose[:6] = -1
+    assert np.array_equal(birth_candidate(_result(loose, np.zeros((3, 3))), dof)[:6], [3] * 6)
+    loose[:6] = 0
+    loose[:3] = -1
+    assert birth_candidate(_result(loose, np.zeros((3, 3))), dof) is None
+    assert np.array_equal(compact_labels([7, 3, -1, 9, 3], [3, 7]), [1, 0, -1, -1, 0])
+
+
+def test_a_change_of_count_needs_a_better_score():
+    """A trial is kept only when it scores better, then the count follows it."""
+    calls: List[int] = []
+
+    def solve(n, labels, bodies):
+        calls.append(n)
+        if n == 0:
+            return _result(np.repeat([0, 1], 50), [[0, 0, 0], [0.01, 0, 0]])
+        assert len(bodies) == n and labels is not None
+        return _result(np.where(labels >= n, -1, labels), np.zeros((n, 3)))
+    count = BodyCount()
+    tracks = np.zeros((100, 5, 4))
+    count.solve(tracks, None, solve)
+    assert count.n == 2 and count.last_change == 'search' and calls == [0]
+    # the bodies move alike (zero rotations in the fake solve): one less is tried; with
+    # equal costs the poorer model wins the BIC by its fewer parameters
+    count.merge_every = 1
+    count.solve(tracks, np.repeat([0, 1], 50), solve)
+    assert calls[1:] == [2, 1] and count.n == 1 and count.last_change == 'merge'
+    assert count.kept == (0, 0)
+    # no labels to start from (the tracker restarted): searched again
+    count.solve(tracks, np.full(100, -1), solve)
+    assert count.last_change == 'search' and calls[-1] == 0
+
+
+def test_body_ids_of_a_new_body_and_a_merged_one():
+    tracker = BodyTracker()
+    ids = np.arange(60)
+    w = np.zeros((2, 3))
+    assert list(tracker.update(ids, np.repeat([0, 1], 30), w)) == [0, 1]
+    # body 1's tracks split off into a new body 2: it gets a fresh id, not 1's
+    got = tracker.update(ids, np.repeat([0, 1, 2], 20), np.zeros((3, 3)), new=[2])
+    assert got[2] == 2 and sorted(got[:2]) == [0, 1]
+    # bodies 0 and 1 merge: the kept id is the one asked for, whatever the histories
+    got = tracker.update(ids, np.repeat([0, 1], [40, 20]), np.zeros((2, 3)), keeps={0: 1})
+    assert got[0] == 1
+
+
+def test_warm_motions_follow_the_stable_ids_of_the_counted_bodies():
+    warm = WarmStarts()
+    warm.motions = {4: (np.ones(3), np.zeros(3)), 7: (2 * np.ones(3), np.ones(3))}
+    kw = warm.keywords(get_method('general'), np.array([0, 1, -1]), 3, ids=[7, -1, 4])
+    w, t = kw['init_motions']
+    assert np.array_equal(w[0], 2 * np.ones(3)) and np.isnan(w[1]).all()
+    assert np.array_equal(w[2], np.ones(3))
+
+
+@pytest.mark.parametrize('seed', [2, 5])
+def test_bodies_are_found_and_retired_as_the_scene_changes(seed):
+    """A box starts, one stops, one leaves: the count follows, ids as a user expects."""
+    run = count.stream_run(seed, 'robust')
+    score = count.score_stream(run)
+    assert score['right'] >= 0.9, (run['count'], run['want'])
+    assert all(d is not None and d <= count.SETTLE for d in score['delays']), score
+    for rule in ('background_kept', 'new_id_fresh', 'stopped_joins_background',
+                 'left_id_unused'):
+        assert score[rule], (rule, run['ids'])
+
+
+def test_a_still_scene_is_one_body():
+    """A fixed count splits a still scene arbitrarily; the automatic one does not."""
+    sc = scheduled_scene([(10 ** 6, 10 ** 6, 10 ** 6)] * 2, 20, seed=1)
+    p = Pipeline(num_bodies=0, window=5)
+    ids = np.arange(len(sc.tracks))
+    counts = [int(p.process_lines(ids, sc.tracks[:, k], k / 30.0, sc.image_size,
+                                  camera=sc.intrinsics).body_valid.sum()) for k in range(20)]
+    assert counts[1:] == [1] * 19, counts
+
+
+def test_bench_count_reports_a_stream(tmp_path):
+    run = count.stream_run(3, 'robust')
+    known = count.stream_run(3, 'robust', num_bodies=4)
+    run.update(method='robust', seed=3, score=count.score_stream(run),
+               cost=count.cost(run['ms'], known['ms'], 5))
+    args = count.parse_args(['--methods', 'robust'])
+    text = count.build_report(args, [], [run], [], 1.0, 'abc1234')
+    assert '| robust | 3 |' in text and 'right count in' in text
+    count.plot([run], [], tmp_path / 'counts.png')
+    assert (tmp_path / 'counts.png').stat().st_size > 1000
+    assert count.parse_args(['--quick']).seed_list == [0]
