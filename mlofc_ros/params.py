@@ -95,7 +95,8 @@ class ParamSpec:
 PARAMETERS: Tuple[ParamSpec, ...] = (
     ParamSpec('num_bodies', int, 2,
               'Number of independently moving rigid bodies, the static background counting as '
-              'one; 0 = choose automatically (if the solver supports it).',
+              'one; 0 = found from the scene and kept up as bodies start, stop and leave '
+              "(a new body gets a new id, one that stops the background's).",
               range=(0, 8)),
     ParamSpec('window', int, 5,
               'Sliding window length in frames; the solver runs on the last `window` frames at '

@@ -65,6 +65,29 @@ def misclassification(pred: np.ndarray, truth: np.ndarray, n_bodies: int) -> flo
     return errors / max(int(np.asarray(truth).shape[0]), 1)
 
 
+def misclassification_any(pred: np.ndarray, truth: np.ndarray) -> float:
+    """
+    Fraction of misclassified lines (0..1) when the number of bodies itself was estimated.
+
+    ``pred (N,)``: any body ids (``-1`` unassigned, always wrong); ``truth (N,)``: true ids.
+    Predicted and true bodies are matched one to one to agree on the most lines; lines of a
+    predicted body left unmatched (more bodies found than there are) are wrong.
+    """
+    pred = np.asarray(pred, dtype=np.int64)
+    truth = np.asarray(truth, dtype=np.int64)
+    ok = pred >= 0
+    p_ids, p_idx = np.unique(pred[ok], return_inverse=True)
+    t_ids, t_idx = np.unique(truth, return_inverse=True)
+    conf = np.zeros((len(p_ids), len(t_ids)), dtype=np.int64)
+    np.add.at(conf, (p_idx, t_idx[ok]), 1)
+    k = max(conf.shape)
+    square = np.zeros((k, k), dtype=np.int64)
+    square[:conf.shape[0], :conf.shape[1]] = conf
+    hits = max((int(square[np.arange(k), perm].sum())
+                for perm in itertools.permutations(range(k))), default=0)
+    return (len(pred) - hits) / max(len(pred), 1)
+
+
 def motion_errors(est: np.ndarray, truth: np.ndarray, perm: Sequence[int]
                   ) -> Tuple[float, float]:
     """

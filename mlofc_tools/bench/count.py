@@ -33,6 +33,12 @@ per solver method (``--methods``; ``window`` 5 for ``robust``, the node's defaul
   the box that starts gets an id no body had, the box that stops takes the background's,
   the id of the box that left is not given to another body. The known-count run has
   ``num_bodies=4`` (the most bodies at any time).
+- **Hopkins155** line tracks (the 155 sequences, lines built as ``bench hopkins_stream``
+  does, window K = 5, f unknown) streamed through ``Pipeline.process_lines`` with the default
+  method, the count unknown and known: from the first full window on, the share of frames
+  whose count is right and the misclassification (bodies matched one to one to the true
+  motions; a body found beyond them is wrong; issue #40: right in 90% of the frames, at most
+  1.25x the known-count misclassification).
 - **real**: ``visp_cube`` (still until frame 38, then the sheet with the cube and the
   cylinder dragged by a hand: one body while still, two while it moves), ``rubik_cube`` (the
   cube turning on a turntable: two) and ``hamburg_taxi`` (three vehicles and the
@@ -47,13 +53,17 @@ import argparse
 import os
 import sys
 import time
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+import zlib
 
 import cv2
 from mlofc_ros.pipeline import FrameResult, Pipeline
 from mlofc_tools.bench import common
+from mlofc_tools.bench.hopkins_runs import LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX
 from mlofc_tools.bench.pipeline import read_real_sequence, REAL_DIR
 from mlofc_tools.bench.real import render_strip
+from mlofc_tools.datasets import hopkins as hk
+from mlofc_tools.scoring import misclassification, misclassification_any
 from mlofc_tools.synthetic import scheduled_scene
 import numpy as np
 
@@ -68,6 +78,8 @@ CHANGES = [0, 16, 31, 45]
 SETTLE = 10
 #: Window per method (the node's default for ``robust``, the recommended one for ``general``).
 WINDOWS = {'robust': 5, 'general': 10}
+#: Frames per window of the Hopkins155 streams (``bench hopkins_stream``'s K).
+HOPKINS_K = 5
 #: Real sequences: name -> (known count, frames shown in the picture).
 REAL = {'visp_cube': (2, (30, 50, 70)), 'rubik_cube': (2, (8, 14, 20)),
         'hamburg_taxi': (4, (12, 24, 36))}
@@ -126,6 +138,60 @@ def score_stream(run: Dict[str, Any]) -> Dict[str, Any]:
     }
 
 
+def hopkins_sequence(item: Tuple[str, str]) -> Dict[str, Any]:
+    """
+    Stream one Hopkins155 sequence with the count unknown and known (worker).
+
+    ``item``: ``(path, method)``. Returns ``name``, ``n``, per full window ``count`` (bodies
+    solved), ``auto`` and ``known`` (misclassification), and the CPU ms per frame of each.
+    """
+    path, method = item
+    seq = hk.load_sequence(path)
+    n = seq.n_motions
+    s = int(np.random.SeedSequence([155, zlib.crc32(seq.name.encode())])
+            .generate_state(1)[0] % (2 ** 31))
+    tracks, truth = hk.line_tracks(seq, LINES_PER_MOTION, None, MIN_LENGTH_PX, seed=s,
+                                   max_uses=MAX_USES)
+    ids = np.arange(tracks.shape[0])
+    rec: Dict[str, Any] = {'name': seq.name, 'n': n, 'count': []}
+    for key, num_bodies in (('auto', 0), ('known', n)):
+        pipe = Pipeline(num_bodies=num_bodies, window=HOPKINS_K, method=method, seed=s)
+        errors, ms = [], []
+        for t in range(tracks.shape[1]):
+            c = time.thread_time()
+            res = pipe.process_lines(ids, tracks[:, t], t / FPS, seq.image_size)
+            ms.append((time.thread_time() - c) * 1e3)
+            if t >= HOPKINS_K - 1:
+                errors.append(misclassification_any(res.labels, truth) if num_bodies == 0
+                              else misclassification(res.labels, truth, n))
+                if num_bodies == 0:
+                    rec['count'].append(frame_count(res))
+        rec[key], rec[f'{key}_ms'] = errors, ms
+    return rec
+
+
+def hopkins_table(records: Sequence[Dict[str, Any]]) -> str:
+    """Markdown: per number of motions, right counts and misclassification, auto and known."""
+    rows = []
+    for n in sorted({r['n'] for r in records}):
+        sel = [r for r in records if r['n'] == n]
+        right = np.mean([np.mean(np.asarray(r['count']) == n) for r in sel])
+        auto = np.mean([np.mean(r['auto']) for r in sel])
+        known = np.mean([np.mean(r['known']) for r in sel])
+        ratio = np.mean([np.mean(r['auto_ms'][HOPKINS_K:]) / np.mean(r['known_ms'][HOPKINS_K:])
+                         for r in sel])
+        found = np.bincount(np.concatenate([r['count'] for r in sel]), minlength=6)
+        rows.append([n, len(sel), f'{100 * right:.0f}', f'{100 * auto:.1f}',
+                     f'{100 * known:.1f}', f'{auto / known:.2f}' if known else '-',
+                     f'{ratio:.2f}',
+                     ', '.join(f'{c}: {100 * v / found.sum():.0f}%'
+                               for c, v in enumerate(found) if v)])
+    return common.markdown_table(
+        ['motions', 'sequences', 'right count % of the frames', 'misclassified % (count '
+         'unknown)', 'misclassified % (count known)', 'ratio', 'CPU mean ratio',
+         'counts found (share of frames)'], rows)
+
+
 def real_run(frames: Sequence[np.ndarray], camera: Any, method: str, num_bodies: int
              ) -> Dict[str, Any]:
     """Run a real sequence; per frame the count and CPU ms, and the results by frame."""
@@ -161,7 +227,8 @@ def real_goal(name: str, counts: Sequence[int]) -> str:
 
 
 def build_report(args: argparse.Namespace, argv: Sequence[str], streams: List[Dict[str, Any]],
-                 reals: List[Dict[str, Any]], seconds: float, revision: Optional[str]) -> str:
+                 reals: List[Dict[str, Any]], seconds: float, revision: Optional[str],
+                 hopkins: Sequence[Dict[str, Any]] = ()) -> str:
     """Return the Markdown report."""
     head = common.run_header(
         'Number of bodies found online', common.command_line('count', argv),
@@ -205,6 +272,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], streams: List[Di
     return '\n'.join([
         head, '## Scheduled stream', '', *summary, '', stream_table, '',
         'Frames to the right count: after the box starts (16), stops (31) and leaves (45).', '',
+        *(['## Hopkins155 streamed', '', f'Method `{args.hopkins_method}`.', '',
+            hopkins_table(hopkins), ''] if hopkins else []),
         '## Real video', '', real_table, '', '![counts per frame](counts.png)', '',
         *pictures, '', '## What is measured', '', doc, ''])
 
@@ -246,7 +315,14 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--methods', default='robust,general',
                    help='comma-separated solver methods (robust,general)')
     p.add_argument('--seeds', default='0,1,2,3,4,5', help='seeds of the scheduled stream')
-    p.add_argument('--quick', action='store_true', help='smoke run: one seed, one method')
+    p.add_argument('--hopkins-method', default='robust',
+                   help="method of the Hopkins155 streams (robust); '' skips them")
+    p.add_argument('--hopkins-sequences', type=int, default=None,
+                   help='stream only the first this many Hopkins155 sequences')
+    p.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1),
+                   help='worker processes of the Hopkins155 streams')
+    p.add_argument('--quick', action='store_true',
+                   help='smoke run: one seed, one method, two Hopkins155 sequences')
     p.add_argument('--out', default=None, help='output folder (default docs/results/count)')
     args = p.parse_args(list(argv))
     args.seed_list = [int(s) for s in args.seeds.split(',') if s]
@@ -255,6 +331,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         p.error('--methods names no method')
     if args.quick:
         args.seed_list, args.method_list = args.seed_list[:1], args.method_list[:1]
+        args.hopkins_sequences = 2
     return args
 
 
@@ -294,6 +371,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             run.update(method=method, name=name, frames=frames, known=known,
                        cost=cost(run['ms'], known['ms'], window))
             reals.append(run)
+    hopkins: List[Dict[str, Any]] = []
+    if args.hopkins_method:
+        paths = hk.list_sequences()[:args.hopkins_sequences]
+        common.eprint(f'count: {len(paths)} Hopkins155 sequences, {args.hopkins_method}')
+        hopkins = common.run_parallel(hopkins_sequence, [(str(p), args.hopkins_method)
+                                                         for p in paths],
+                                      args.jobs, 'sequences')
     out_dir = common.results_dir('count', args.out)
     plot(streams, reals, out_dir / 'counts.png')
     for name, (n_known, shown) in REAL.items():
@@ -308,7 +392,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if strip is not None:
             cv2.imwrite(str(out_dir / f'{name}.png'), strip, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     common.write_report('count', args.out, build_report(args, argv, streams, reals,
-                                                        time.monotonic() - t0, revision))
+                                                        time.monotonic() - t0, revision,
+                                                        hopkins))
     return 0
 
 
