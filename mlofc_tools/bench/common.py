@@ -160,6 +160,20 @@ def parse_param_option(parser: argparse.ArgumentParser, args: argparse.Namespace
         parser.error(str(err))                 # exits (status 2)
 
 
+def add_methods_option(parser: argparse.ArgumentParser, default: str) -> None:
+    """Add ``--methods A,B``: the solver methods a benchmark compares (:func:`method_list`)."""
+    parser.add_argument('--methods', default=default,
+                        help=f'comma-separated solver methods ({default})')
+
+
+def method_list(parser: argparse.ArgumentParser, args: argparse.Namespace) -> List[str]:
+    """Return the methods of ``--methods``; none is a usage error."""
+    methods = [m for m in args.methods.split(',') if m]
+    if not methods:
+        parser.error('--methods names no method')             # exits (status 2)
+    return methods
+
+
 def format_number(x: object, digits: int = 3) -> str:
     """Format a table cell: floats with ``digits`` significant digits, NaN as an em dash."""
     if isinstance(x, (float, np.floating)):

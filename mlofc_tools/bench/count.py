@@ -312,8 +312,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench count',
                                 description=__doc__.split('\n')[1])
     p.add_argument('--real-dir', default=REAL_DIR, help=f'real sequences (default {REAL_DIR})')
-    p.add_argument('--methods', default='robust,general',
-                   help='comma-separated solver methods (robust,general)')
+    common.add_methods_option(p, 'robust,general')
     p.add_argument('--seeds', default='0,1,2,3,4,5', help='seeds of the scheduled stream')
     p.add_argument('--hopkins-method', default='robust',
                    help="method of the Hopkins155 streams (robust); '' skips them")
@@ -326,9 +325,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--out', default=None, help='output folder (default docs/results/count)')
     args = p.parse_args(list(argv))
     args.seed_list = [int(s) for s in args.seeds.split(',') if s]
-    args.method_list = [m for m in args.methods.split(',') if m]
-    if not args.method_list:
-        p.error('--methods names no method')
+    args.method_list = common.method_list(p, args)
     if args.quick:
         args.seed_list, args.method_list = args.seed_list[:1], args.method_list[:1]
         args.hopkins_sequences = 2

@@ -191,8 +191,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench focal',
                                 description=__doc__.split('\n')[1])
     p.add_argument('--real-dir', default=REAL_DIR, help=f'real sequences (default {REAL_DIR})')
-    p.add_argument('--methods', default='general,robust',
-                   help='comma-separated solver methods (general,robust)')
+    common.add_methods_option(p, 'general,robust')
     p.add_argument('--window', type=int, default=10, help='window length, frames (10)')
     p.add_argument('--seeds', default='0,1,2', help='render seeds (0,1,2)')
     p.add_argument('--quick', action='store_true',
@@ -200,9 +199,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--out', default=None, help='output folder (default docs/results/focal)')
     args = p.parse_args(list(argv))
     args.seed_list = [int(s) for s in args.seeds.split(',') if s]
-    args.method_list = [m for m in args.methods.split(',') if m]
-    if not args.method_list:
-        p.error('--methods names no method')
+    args.method_list = common.method_list(p, args)
     if args.quick:
         args.seed_list = args.seed_list[:1]
     return args

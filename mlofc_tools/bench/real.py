@@ -419,7 +419,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                                 description=__doc__.split('\n')[1])
     p.add_argument('--real-dir', default=REAL_DIR,
                    help=f'real sequences (default {REAL_DIR}); scores {SEQUENCE}/')
-    p.add_argument('--methods', default='robust,general', help='comma-separated solver methods')
+    common.add_methods_option(p, 'robust,general')
     p.add_argument('--window', type=int, default=10, help='window length, frames (10)')
     p.add_argument('--moving-px', type=float, default=2.0,
                    help=f'a segment moving more than this over {LAG} frames is moving (2.0)')
@@ -433,9 +433,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--out', default=None, help='output folder (default docs/results/real)')
     args = p.parse_args(list(argv))
     args.params = common.parse_param_option(p, args)
-    args.method_list = [m for m in args.methods.split(',') if m]
-    if not args.method_list:
-        p.error('--methods names no method')
+    args.method_list = common.method_list(p, args)
     if args.quick:
         args.first, args.last, args.method_list = 30, 60, args.method_list[:1]
     return args
