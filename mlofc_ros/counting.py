@@ -151,8 +151,6 @@ class BodyCount:
     def reset(self) -> None:
         """Forget the count: the next window is searched for every count."""
         self.n = 0
-        #: Frames of the window the count was last searched in (0: not yet).
-        self.searched_frames = 0
         self._since_birth = 0
         self._since_merge = 0
         # a search for one more that failed waits twice as long as the one before (a real
@@ -194,7 +192,6 @@ class BodyCount:
         if self.n == 0 or previous is None or not np.any(np.asarray(previous) >= 0):
             res = solve(0, None, None)
             self.n, self._since_birth, self.last_change = res.n_bodies, 0, 'search'
-            self.searched_frames = int(np.asarray(tracks).shape[1])
             return res
         dof = track_dof(tracks)
         current = list(range(self.n))

@@ -603,10 +603,7 @@ class Pipeline:
                 res = solve(n_req, self.bodies.previous_labels(obs.win_ids))
             else:
                 previous = None
-                # searched again once the window is full: the first search saw 2 frames
-                if (self._counted_ids is not None and len(self._counted_ids) == self._count.n
-                        and not self._count.searched_frames < obs.window_fill
-                        == int(self.params['window'])):
+                if self._counted_ids is not None and len(self._counted_ids) == self._count.n:
                     previous = compact_labels(self.bodies.previous_labels(obs.win_ids),
                                               self._counted_ids)
                 res = self._count.solve(obs.win_tracks, previous, counted)

@@ -29,7 +29,8 @@ until the window holds ``solver.methods.GENERAL_MIN_FRAMES``, are solved rotatio
 the first full window is searched (from those labels too) and every later one is
 warm-started (from the previous labels and from every track reassigned at the previous
 motions, the lower score kept) with every body rescanned; focal length unknown, estimated
-per window until ``pipeline.FOCAL_SAMPLES`` estimates, then fixed at their median. Scored on
+per window until ``pipeline.FOCAL_SAMPLES`` estimates, then started at their median and
+refined from windows that share no frame (:class:`mlofc_ros.solver.focal.FocalEstimate`). Scored on
 the published labels of every full window (a line the solver leaves unassigned keeps its last
 body for ``label_memory`` frames, as the node publishes it; ``-1`` counts as wrong). Stamps
 are 30 frames/s (only the published rad/s depend on them). Reference on the same lines: the
