@@ -140,7 +140,8 @@ class BodyCount:
     The current number of bodies of a stream and when to try another (not thread-safe).
 
     :meth:`solve` runs the window's solves through a callback, so that the caller keeps its
-    warm starts and stable ids: ``solve(n, init_labels)`` (see :data:`Solve`).
+    warm starts and stable ids: ``solve(n, init_labels, bodies)`` (see :data:`Solve`). A
+    trial whose solve raises ``ValueError`` (too few tracks for one more body) is lost.
     """
 
     def __init__(self, birth_every: int = BIRTH_EVERY, merge_every: int = MERGE_EVERY) -> None:
@@ -206,8 +207,9 @@ class BodyCount:
         if merged is not None:
             self._since_merge = 0
             labels, gone, keep = merged
-            trial = solve(self.n - 1, labels, [b for b in current if b != gone])
-            if bic_score(trial, sigma, dof) < bic_score(res, sigma, dof) - SCORE_MARGIN:
+            trial = _trial(solve, self.n - 1, labels, [b for b in current if b != gone])
+            if (trial is not None and bic_score(trial, sigma, dof)
+                    < bic_score(res, sigma, dof) - SCORE_MARGIN):
                 self.n, self.last_change = self.n - 1, 'merge'
                 self._last, self._since_change = 'merge', 0
                 if keep >= 0:
@@ -229,14 +231,16 @@ class BodyCount:
                 or loose.sum() >= self._loose_at_failure + min_body_lines(dof)):
             proposals.append(np.where(loose, -1, born))
         for labels in proposals:
-            trial = solve(self.n + 1, labels, current + [-1])
+            trial = _trial(solve, self.n + 1, labels, current + [-1])
+            if trial is None:
+                continue
             counts = np.bincount(trial.labels[trial.labels >= 0], minlength=trial.n_bodies)
             richer = trial.diagnostics.sigma_px
             richer = float(richer) if np.isfinite(richer) and richer > 0 else None
             if (trial.n_bodies == self.n + 1 and np.all(counts >= min_body_lines(dof))
                     and bic_score(trial, richer, dof) < bic_score(res, richer, dof)
                     - SCORE_MARGIN):
-                self.new_body = _holder(trial.labels, loose)
+                self.new_body = _newest(trial.labels, loose)
                 self.n, self.last_change = self.n + 1, 'birth'
                 self._last, self._since_change = 'birth', 0
                 self._since_birth = self.birth_every - 1     # another may follow at once
@@ -247,6 +251,24 @@ class BodyCount:
             self._search_wait = min(2 * self._search_wait, MAX_SEARCH_WAIT)
             self._loose_at_failure = int(loose.sum())
         return res
+
+
+def _trial(solve: Solve, n: int, labels: np.ndarray, bodies: Sequence[int]
+           ) -> Optional[SegmentationResult]:
+    """Run a trial solve; None when it cannot be solved (a ``ValueError``)."""
+    try:
+        return solve(n, labels, bodies)
+    except ValueError:
+        return None
+
+
+def _newest(labels: np.ndarray, loose: np.ndarray) -> int:
+    """Return the body whose tracks were the most often loose before (the new one)."""
+    lab = np.asarray(labels)
+    held = lab >= 0
+    sizes = np.bincount(lab[held])
+    from_loose = np.bincount(lab[held & loose], minlength=len(sizes))
+    return int(np.argmax(from_loose / np.maximum(sizes, 1))) if sizes.size else -1
 
 
 def _holder(labels: np.ndarray, tracks: np.ndarray) -> int:

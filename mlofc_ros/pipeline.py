@@ -573,7 +573,8 @@ class Pipeline:
         Run the solver on the window of ``obs``; None (and why in ``problems``) if it did not.
 
         The ``method`` parameter's method, or its stand-in while the window holds too few
-        frames, warm-started from the previous solves.
+        frames, warm-started from the previous solves; with ``num_bodies=0`` at the count
+        kept online (:class:`~mlofc_ros.counting.BodyCount`).
         """
         if obs.window_fill < 2 or obs.blank:           # a blank frame observes no motion
             return None

@@ -89,6 +89,20 @@ def test_a_change_of_count_needs_a_better_score():
     assert count.last_change == 'search' and calls[-1] == 0
 
 
+def test_a_trial_that_cannot_be_solved_is_lost_not_the_frame():
+    def solve(n, labels, bodies):
+        if n == 0:
+            return _result(np.repeat([0, -1], [80, 20]), [[0, 0, 0]])
+        if n > 1:
+            raise ValueError('20 usable tracks: too few for 2 bodies')
+        return _result(np.where(labels >= n, -1, labels), np.zeros((n, 3)))
+    count = BodyCount(birth_every=1)
+    tracks = np.zeros((100, 5, 4))
+    count.solve(tracks, None, solve)
+    res = count.solve(tracks, np.repeat([0, -1], [80, 20]), solve)
+    assert count.n == 1 and count.last_change is None and res.n_bodies == 1
+
+
 def test_body_ids_of_a_new_body_and_a_merged_one():
     tracker = BodyTracker()
     ids = np.arange(60)
