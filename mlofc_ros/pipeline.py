@@ -730,8 +730,8 @@ class Pipeline:
                                       len(np.asarray(res.angular_velocities).reshape(-1, 3)),
                                       (w / 2.0, h / 2.0), focal,
                                       noise_var=res.diagnostics.sigma_px ** 2)
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            problems.append(f'focal length not refined: {exc}')
+        except Exception as exc:  # noqa: B902 (a failed refinement must not lose the frame)
+            problems.append(f'focal length not refined: {type(exc).__name__}: {exc}')
             return
         self._focal_evidence_stamp = obs.stamp
         self._focal.add(evidence)

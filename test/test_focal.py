@@ -97,3 +97,19 @@ def test_focal_covariance_is_the_first_order_change_of_the_rotation():
     cov = focal_covariance(w0, 0.1)
     assert np.allclose(cov, 0.01 * expected[:, :, None] * expected[:, None, :])
     assert not focal_covariance(w0, 0.0).any() and not focal_covariance(w0, math.nan).any()
+
+
+def test_a_failed_refinement_is_reported_and_the_frame_kept(monkeypatch):
+    """The focal evidence of a window failing (whatever the error) loses no frame."""
+    import mlofc_ros.pipeline as pipeline_module
+
+    def broken(*args, **kwargs):
+        raise FloatingPointError('overflow')
+    monkeypatch.setattr(pipeline_module, 'focal_evidence', broken)
+    sc = make_scene(2, 60, n_frames=40, noise_px=0.5, image_size=SIZE, focal_length=F_TRUE,
+                    seed=1, rotation_deg=(0.2, 0.4))
+    p = pipeline_module.Pipeline(num_bodies=2, window=10, method='general')
+    ids = np.arange(len(sc.tracks))
+    out = [p.process_lines(ids, sc.tracks[:, k], k / 30.0, SIZE) for k in range(22)]
+    failed = [r for r in out if r.problem and 'focal length not refined' in r.problem]
+    assert failed and all(r.solved for r in failed)
