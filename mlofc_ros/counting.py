@@ -35,8 +35,7 @@ warm solve, so the automatic count costs about 1.2-1.5 known-count solves a fram
 from typing import Callable, Optional, Sequence, Tuple
 
 from mlofc_ros.solver import SegmentationResult
-from mlofc_ros.solver.model_selection import (bic_score, MAX_BODIES, MIN_BODY_FRACTION,
-                                              MIN_BODY_LINES)
+from mlofc_ros.solver.model_selection import bic_score, MAX_BODIES, min_body_lines, track_dof
 import numpy as np
 
 #: Solves between two tries of one more body while tracks stay unexplained.
@@ -62,17 +61,6 @@ SCORE_MARGIN = 10.0
 #: in ``0..n-1`` (``-1`` unknown), body ``i`` continuing the current body ``bodies[i]`` (``-1``:
 #: a new one); the automatic count's search when ``n == 0`` (labels and bodies None).
 Solve = Callable[[int, Optional[np.ndarray], Optional[Sequence[int]]], SegmentationResult]
-
-
-def min_body_lines(dof: np.ndarray) -> int:
-    """Return the fewest tracks a body may hold: ``MIN_BODY_LINES``, or 4% of the usable."""
-    return max(MIN_BODY_LINES, int(np.ceil(MIN_BODY_FRACTION * int(np.sum(dof > 0)))))
-
-
-def track_dof(tracks: np.ndarray) -> np.ndarray:
-    """Return the equations ``(N,)`` of every track: 2 per pair of consecutive frames seen."""
-    ok = np.isfinite(np.asarray(tracks)[..., 0])
-    return 2.0 * np.sum(ok[:, :-1] & ok[:, 1:], axis=1)
 
 
 def merge_candidate(res: SegmentationResult, dof: np.ndarray

@@ -16,9 +16,10 @@ from typing import List
 
 from mlofc_ros.bodies import BodyTracker
 from mlofc_ros.counting import (birth_candidate, BodyCount, compact_labels, merge_candidate,
-                                MERGE_CHI2, min_body_lines)
+                                MERGE_CHI2)
 from mlofc_ros.pipeline import Pipeline
 from mlofc_ros.solver import get_method
+from mlofc_ros.solver.model_selection import min_body_lines
 from mlofc_ros.solver.result import SegmentationResult
 from mlofc_ros.solver.warm import WarmStarts
 from mlofc_tools.bench import count

@@ -38,6 +38,17 @@ MIN_BODY_LINES = 4
 MIN_BODY_FRACTION = 0.04
 
 
+def track_dof(tracks: np.ndarray) -> np.ndarray:
+    """Return the equations ``(N,)`` of every track: 2 per pair of consecutive frames seen."""
+    ok = np.isfinite(np.asarray(tracks)[..., 0])
+    return 2.0 * np.sum(ok[:, :-1] & ok[:, 1:], axis=1)
+
+
+def min_body_lines(dof: np.ndarray) -> int:
+    """Return the fewest tracks a body may hold: ``MIN_BODY_LINES``, or 4% of the usable."""
+    return max(MIN_BODY_LINES, int(np.ceil(MIN_BODY_FRACTION * int(np.sum(dof > 0)))))
+
+
 def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) -> float:
     """
     BIC of a segmentation: ``R log(RSS / R) + 3 n log R + 2 N log n``.
@@ -78,8 +89,7 @@ def select_bodies(tracks: np.ndarray, intrinsics: Optional[Tuple[float, float, f
     ``tracks (N, K, 4)``, ``intrinsics`` and ``image_size`` as checked by
     :func:`.segment_lines`; every n is solved cold.
     """
-    ok = np.isfinite(tracks[..., 0])
-    dof = 2.0 * np.sum(ok[:, :-1] & ok[:, 1:], axis=1)
+    dof = track_dof(tracks)
     usable = int(np.sum(dof > 0))
     results = []
     for n in range(1, max_bodies + 1):
@@ -90,7 +100,7 @@ def select_bodies(tracks: np.ndarray, intrinsics: Optional[Tuple[float, float, f
         raise ValueError(f'{usable} usable tracks: too few to fit even one body')
     # a body must hold a few lines: with 2 frames, 2 lines (4 equations, 3 unknowns) fit any
     # rotation, so tiny "bodies" would soak up the worst-fitting lines of a real one
-    min_lines = max(MIN_BODY_LINES, int(np.ceil(MIN_BODY_FRACTION * usable)))
+    min_lines = min_body_lines(dof)
     scores = [bic_score(r, None, dof)
               if np.all(np.bincount(r.labels[r.labels >= 0], minlength=r.n_bodies) >= min_lines)
               or r.n_bodies == 1 else np.inf for r in results]
