@@ -74,18 +74,14 @@ def misclassification_any(pred: np.ndarray, truth: np.ndarray) -> float:
     predicted body left unmatched (more bodies found than there are) are wrong.
     """
     pred = np.asarray(pred, dtype=np.int64)
-    truth = np.asarray(truth, dtype=np.int64)
     ok = pred >= 0
-    p_ids, p_idx = np.unique(pred[ok], return_inverse=True)
-    t_ids, t_idx = np.unique(truth, return_inverse=True)
-    conf = np.zeros((len(p_ids), len(t_ids)), dtype=np.int64)
-    np.add.at(conf, (p_idx, t_idx[ok]), 1)
-    k = max(conf.shape)
-    square = np.zeros((k, k), dtype=np.int64)
-    square[:conf.shape[0], :conf.shape[1]] = conf
-    hits = max((int(square[np.arange(k), perm].sum())
-                for perm in itertools.permutations(range(k))), default=0)
-    return (len(pred) - hits) / max(len(pred), 1)
+    # both numbered 0.. so that best_permutation matches them over the larger count
+    found, compact = np.unique(pred[ok], return_inverse=True)
+    numbered = np.full(pred.shape, -1, dtype=np.int64)
+    numbered[ok] = compact
+    bodies, true = np.unique(np.asarray(truth, dtype=np.int64), return_inverse=True)
+    _, errors = best_permutation(numbered, true, max(len(found), len(bodies)))
+    return errors / max(len(pred), 1)
 
 
 def motion_errors(est: np.ndarray, truth: np.ndarray, perm: Sequence[int]
