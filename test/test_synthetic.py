@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """The synthetic scene generator (paper section 4.1), its outliers and the scoring helpers."""
-from mlofc_tools.scoring import best_permutation, misclassification, motion_errors
+from mlofc_tools.scoring import (best_permutation, misclassification, misclassification_any,
+                                 motion_errors)
 from mlofc_tools.synthetic import add_outliers, make_scene, MIXES, rotation_matrices
 import numpy as np
 import pytest
@@ -128,6 +129,11 @@ def test_scoring_helpers():
     w = np.array([[0.1, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.0]])
     rel, abs_deg = motion_errors(w[[1, 2, 0]], w, perm)
     assert rel == 0.0 and abs_deg == 0.0
+    # the count estimated: any ids, a body found beyond the true ones is wrong
+    assert misclassification_any(pred * 10 + 7, truth) == pytest.approx(2 / 7)
+    assert misclassification_any(np.array([5, 5, 5, 9, 9, 3, 3]), truth) == 0.0
+    assert misclassification_any(np.array([5, 5, 4, 9, 9, 3, 3]), truth) == pytest.approx(1 / 7)
+    assert misclassification_any(np.zeros(7, int), truth) == pytest.approx(4 / 7)
 
 
 @pytest.mark.parametrize('mix', MIXES)
