@@ -726,8 +726,7 @@ class Pipeline:
             return
         w, h = obs.image_size
         try:
-            evidence = focal_evidence(obs.win_tracks, np.asarray(res.labels),
-                                      len(np.asarray(res.angular_velocities).reshape(-1, 3)),
+            evidence = focal_evidence(obs.win_tracks, np.asarray(res.labels), res.n_bodies,
                                       (w / 2.0, h / 2.0), focal,
                                       noise_var=res.diagnostics.sigma_px ** 2)
         except Exception as exc:  # noqa: B902 (a failed refinement must not lose the frame)

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 import math
 from math import comb
-from typing import Callable, Deque, Optional, Tuple
+from typing import Callable, Deque, Dict, Optional, Tuple
 
 import numpy as np
 
@@ -209,12 +209,12 @@ def body_profiles(tracks: np.ndarray, labels: np.ndarray, n: int,
     out = np.zeros((len(focal), n))
     cx, cy = centre
     rows = np.zeros(n)
+    labelled = np.flatnonzero(lab >= 0)
     for i, f in enumerate(np.asarray(focal, dtype=float)):
         flows = line_flows(tracks, (f, f, cx, cy))
         c, _ = fit_bodies(flows, lab, n)
         costs = track_costs(flows, c, weighted=True)
-        idx = np.flatnonzero(lab >= 0)
-        idx = idx[np.isfinite(costs[idx, lab[idx]])]
+        idx = labelled[np.isfinite(costs[labelled, lab[labelled]])]
         out[i] = np.bincount(lab[idx], weights=costs[idx, lab[idx]], minlength=n)
         if i == 0:
             rows = np.bincount(lab[idx], weights=2.0 * flows.pairs_per_track()[idx],
@@ -270,10 +270,13 @@ def focal_evidence(tracks: np.ndarray, labels: np.ndarray, n: int,
     k = np.argmin(costs, axis=0)
     h = _CURVATURE_STEP
     xs, variances = [], []
+    near: Dict[int, np.ndarray] = {}      # grid minimum -> every body's costs 5% either side
     for b in np.flatnonzero((k > 0) & (k < _GRID - 1) & (dof > 0)):
         x = grid[k[b]]
-        c_lo, c_mid, c_hi = body_profiles(tracks, lab, n, centre,
-                                          np.exp(x + np.array([-h, 0.0, h])))[0][:, b]
+        if k[b] not in near:
+            near[k[b]] = body_profiles(tracks, lab, n, centre,
+                                       np.exp(x + np.array([-h, 0.0, h])))[0]
+        c_lo, c_mid, c_hi = near[k[b]][:, b]
         curvature = (c_lo - 2.0 * c_mid + c_hi) / h ** 2
         noise = c_mid / dof[b]
         if not (curvature > 0 and c_mid > 0) or (
@@ -283,12 +286,26 @@ def focal_evidence(tracks: np.ndarray, labels: np.ndarray, n: int,
         variances.append(2.0 * noise / curvature)
     if not xs:
         return FocalEvidence(f0, math.inf)
-    x, w = np.array(xs), 1.0 / np.array(variances)
-    mean = float(w @ x / w.sum())
-    var = 1.0 / float(w.sum())
+    mean, var = pooled(np.array(xs), 1.0 / np.array(variances))
+    return FocalEvidence(math.exp(mean), math.sqrt(var))
+
+
+def pooled(x: np.ndarray, w: np.ndarray, prior: Tuple[float, float] = (0.0, 0.0)
+           ) -> Tuple[float, float]:
+    """
+    Return the inverse-variance mean of ``x (k,)`` with weights ``w (k,)``, and its variance.
+
+    ``prior``: ``(mean, weight)`` of a prior taking part in the mean. The variance is
+    multiplied by the Birge ratio of ``x`` (its chi-square about the mean over ``k - 1``)
+    when it exceeds 1: values that disagree beyond their spread widen it.
+    """
+    x0, w0 = prior
+    weight = w0 + float(w.sum())
+    mean = (w0 * x0 + float(w @ x)) / weight
+    var = 1.0 / weight
     if len(x) >= 2:
         var *= max(1.0, float(w @ (x - mean) ** 2) / (len(x) - 1))
-    return FocalEvidence(math.exp(mean), math.sqrt(var))
+    return mean, var
 
 
 class FocalEstimate:
@@ -327,14 +344,8 @@ class FocalEstimate:
         self._evidence.append(evidence)
         x0, s0 = self._prior
         ev = [e for e in self._evidence if math.isfinite(e.log_sigma) and e.log_sigma > 0]
-        x = np.array([math.log(e.focal) for e in ev])
-        w = np.array([e.log_sigma ** -2 for e in ev])
-        weight = s0 ** -2 + float(w.sum())
-        mean = (x0 * s0 ** -2 + float(w @ x)) / weight
-        var = 1.0 / weight
-        if len(ev) >= 2:
-            birge = float(w @ (x - mean) ** 2) / (len(ev) - 1)
-            var *= max(1.0, birge)
+        mean, var = pooled(np.array([math.log(e.focal) for e in ev]),
+                           np.array([e.log_sigma ** -2 for e in ev]), (x0, s0 ** -2))
         self.focal = math.exp(mean)
         self.log_sigma = min(math.sqrt(var), s0)
         if len(ev) < FOCAL_MIN_WINDOWS:         # too few windows to check each other
