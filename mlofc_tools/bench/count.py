@@ -358,6 +358,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     cv2.setNumThreads(1)
     t0 = time.monotonic()
     streams, reals = [], []
+    sequences = {name: read_real_sequence(os.path.join(args.real_dir, name)) for name in REAL}
     for method in args.method_list:
         window = WINDOWS.get(method, 5)
         for seed in args.seed_list:
@@ -368,7 +369,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                        cost=cost(run['ms'], known['ms'], window))
             streams.append(run)
         for name, (n_known, _) in REAL.items():
-            frames, camera = read_real_sequence(os.path.join(args.real_dir, name))
+            frames, camera = sequences[name]
             if len(frames) < 2 * window:
                 common.eprint(f'count: {name} not found in {args.real_dir}; skipped')
                 continue
