@@ -52,12 +52,16 @@ decodes every queued image, tracks its lines and adds them to the window
 the same thread (:meth:`Pipeline.solve`, then publishing). A slow method's
 (:attr:`mlofc_ros.solver.Method.slow`: 1-3 s per window) goes to a solver worker, which
 segments the newest window it has not solved yet while the tracking worker goes on: the
-tracker still sees every frame, so its tracks survive. Of the frames tracked while the solver
-was busy it solves the newest next; the others (``unsolved`` in ``stats``, counted as dropped)
-are answered from the running fit (:meth:`Pipeline.carry`): their ``~/segments`` cloud gives
-each segment the body its track had at the last solve (NaN residuals; ``carried`` in
-``stats``), and no twist (only a solve measures one). The clouds' stamps only increase: a solve
-that ends after newer frames were answered so publishes its twists but not its cloud.
+tracker still sees every frame, so its tracks survive. With ``solver_process`` (the default)
+that worker hands the window to a child process (:class:`mlofc_ros.solve_process.SolveProcess`)
+and waits: the solver gets a core of its own instead of half the interpreter. Of the frames
+tracked while the solver was busy it solves the newest next; the others (``unsolved`` in
+``stats``, counted as dropped) are answered from the running fit (:meth:`Pipeline.carry`):
+their ``~/segments`` cloud gives each segment the body its track had at the last solve (NaN
+residuals; ``carried`` in ``stats``), and no twist (only a solve measures one). The clouds'
+stamps only increase, so the frame being solved is answered from the running fit too when a
+newer frame is: its solve then publishes its twists but not its cloud (``late``). Every
+tracked frame gets a cloud.
 Parameters: see :mod:`mlofc_ros.params` (``ros2 param describe /mlofc <name>``); all can be
 changed at run time, invalid values are rejected with the reason and the old value kept. Write
 doubles as ``-p focal_length:=500.0`` (``:=500`` is accepted too: doubles are declared with
@@ -82,6 +86,7 @@ from mlofc_ros.messages.debug import draw_debug
 from mlofc_ros.pipeline import FrameResult, Observation, Pipeline
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
                                     segments_msg, stamp_to_seconds, twist_msg)
+from mlofc_ros.solve_process import SolveProcess
 from mlofc_ros.solver import get_method
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -188,16 +193,20 @@ class MlofcNode(Node):
         self.problem_hold = PROBLEM_HOLD
         #: frame counters: received = processed (solved and published) + dropped + skipped +
         #: errors; dropped counts the queue's drops and the ``unsolved`` frames (tracked, then
-        #: replaced by a newer one before the solver was free), of which ``carried`` got their
-        #: ``~/segments`` from the running fit (Pipeline.carry); ``late``: processed frames
-        #: whose cloud was not published (newer frames were answered first). One cloud per
-        #: processed frame, less the late ones, plus the carried ones.
+        #: replaced by a newer one before the solver was free); ``carried``: clouds from the
+        #: running fit (Pipeline.carry) of unsolved frames and of frames still being solved
+        #: when a newer one was answered; ``late``: processed frames whose own cloud was not
+        #: published (newer frames were answered first). One cloud per processed frame, less
+        #: the late ones, plus the carried ones.
         self.stats = {'received': 0, 'processed': 0, 'dropped': 0, 'skipped': 0, 'errors': 0,
                       'unsolved': 0, 'carried': 0, 'late': 0}
         self.last_result: Optional[FrameResult] = None
         self._focal_state: Optional[str] = None   # focal_state() of the last solved frame
 
         self._pipeline = Pipeline(**{k: values[k] for k in P.names('pipeline')})
+        # the solve side in a child process (solver_process, a slow method), or None: here
+        self._remote: Optional[SolveProcess] = None
+        self._place_solver({})
 
         out_qos = QoSProfile(depth=OUTPUT_DEPTH)
         self._seg_pub = self.create_publisher(PointCloud2, '~/segments', out_qos)
@@ -225,6 +234,8 @@ class MlofcNode(Node):
         self._cloud_key: Tuple[int, float] = (-1, -math.inf)
         self._cloud_lock = threading.Lock()
         self._solving = False
+        # (header, observation) the solver worker is solving and nobody answered yet
+        self._in_solve: Optional[Tuple[Any, Observation]] = None
         self._last_solve_s = 0.0            # wall time of the last solve
         self._solve_wake = threading.Condition(self._lock)
         self._stop = threading.Event()
@@ -271,7 +282,8 @@ class MlofcNode(Node):
         with self._lock:
             self._values.update(changed)
             self._pending.update({k: v for k, v in changed.items()
-                                  if P.PARAMS[k].scope == 'pipeline'})
+                                  if P.PARAMS[k].scope == 'pipeline'
+                                  or k == 'solver_process'})
             self._trim_queue()
         if 'num_bodies' in changed:
             self._make_twist_publishers(changed['num_bodies'])
@@ -356,7 +368,7 @@ class MlofcNode(Node):
         last_t, last_n = self._diag_last
         self._diag_last = (now, stats['processed'])
         rate = (stats['processed'] - last_n) / max(now - last_t, 1e-9)
-        r = self.last_result
+        r, remote = self.last_result, self._remote
         recent = problem is not None and now - problem[0] <= self.problem_hold
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if recent else DiagnosticStatus.OK,
@@ -377,6 +389,7 @@ class MlofcNode(Node):
             'errors': stats['errors'],
             'focal length (px)': f'{r.focal_length:.1f}' if r is not None else 'nan',
             'focal length': focal_text(r),
+            'solver': 'thread' if remote is None else f'child process {remote.pid}',
             'last problem': problem[1] if problem is not None else 'none',
             'last problem age (s)': f'{now - problem[0]:.1f}' if problem is not None else '',
         }
@@ -406,13 +419,38 @@ class MlofcNode(Node):
                         self._solve_wake.wait(0.2)
             try:
                 if pending:
-                    self._pipeline.reconfigure(**pending)
+                    self._reconfigure(pending)
                 self._observe(*item, debug=debug)
             except Exception as exc:  # noqa: B902 (the worker must survive anything)
                 self._count('errors')
                 if self._stop.is_set() or not self.context.ok():
                     return
                 self._warn('error', f'frame failed: {type(exc).__name__}: {exc}')
+
+    def _reconfigure(self, pending: Dict[str, Any]) -> None:
+        """Apply pipeline parameters to both halves (the solver idle): see _place_solver."""
+        changes = {k: v for k, v in pending.items() if P.PARAMS[k].scope == 'pipeline'}
+        self._pipeline.reconfigure(**changes)
+        self._place_solver(changes)
+
+    def _place_solver(self, changes: Dict[str, Any]) -> None:
+        """
+        Solve in a child process or here, as ``solver_process`` and the method ask.
+
+        ``changes``: the pipeline parameters just applied here, for the child too. Moving the
+        solve side (a child started or closed) restarts the body ids: the state stays behind.
+        """
+        wanted = (self._values['solver_process']
+                  and get_method(self._pipeline.params['method']).slow)
+        if wanted and self._remote is None:
+            self._remote = SolveProcess(self._pipeline.params)
+            self._pipeline.forget_solves()
+        elif not wanted and self._remote is not None:
+            self._remote.close()
+            self._remote = None
+            self._pipeline.forget_solves()
+        elif self._remote is not None and changes:
+            self._remote.reconfigure(**changes)
 
     def _count(self, key: str) -> None:
         with self._lock:
@@ -457,22 +495,26 @@ class MlofcNode(Node):
             inline = (self._observed is None and not self._solving
                       and self._last_solve_s < INLINE_SOLVE_S
                       and not get_method(self._pipeline.params['method']).slow)
-            older = None
+            older = in_solve = None
             if inline:
                 self._solving = True
             else:
                 if self._observed is not None:
                     # the solver is behind: the newer window replaces the unsolved one, which
-                    # is answered from the running fit
+                    # is answered from the running fit, and so is the frame being solved (its
+                    # own cloud would come after that one's: late)
                     older = self._observed
                     obs = obs.replacing(older[1])
                     self.stats['dropped'] += 1
                     self.stats['unsolved'] += 1
+                    in_solve, self._in_solve = self._in_solve, None
                 self._observed = (msg.header, obs, debug)
                 self._solve_wake.notify_all()
         if inline:
             self._solve_guarded(msg.header, obs, debug)
         elif older is not None and self._values['carry_labels']:
+            if in_solve is not None:
+                self._publish_carried(*in_solve)
             self._publish_carried(older[0], older[1])
 
     def _publish_carried(self, header: Any, obs: Observation) -> None:
@@ -503,7 +545,10 @@ class MlofcNode(Node):
                     return
                 (header, obs, debug), self._observed = self._observed, None
                 self._solving = True
+                self._in_solve = (header, obs)
             self._solve_guarded(header, obs, debug)
+            with self._lock:
+                self._in_solve = None
 
     def _solve_guarded(self, header: Any, obs: Observation, debug: bool) -> None:
         """Solve and publish (``_solving`` set by the caller); count and warn on failure."""
@@ -520,7 +565,9 @@ class MlofcNode(Node):
 
     def _solve(self, header: Any, obs: Observation, debug: bool) -> None:
         t = time.monotonic()
-        result = self._pipeline.solve(obs)
+        remote = self._remote
+        result = (self._pipeline.solve(obs) if remote is None
+                  else remote.solve(obs, self._pipeline))
         self._last_solve_s = time.monotonic() - t
         if result.problem:
             self._warn('pipeline', result.problem)
@@ -576,6 +623,8 @@ class MlofcNode(Node):
         for worker in (self._worker, self._solver):
             if worker.is_alive() and threading.current_thread() is not worker:
                 worker.join(timeout=10.0)
+        if self._remote is not None:
+            self._remote.close()
         super().destroy_node()
 
 

@@ -185,6 +185,12 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               'segment labelled as its track was at the last solve (NaN residuals, no twist); '
               'false = publish solved frames only.',
               scope='node'),
+    ParamSpec('solver_process', bool, True,
+              'Solve a slow method (general) in a child process of the node, so that the '
+              'solver has a core of its own beside the tracking (in a thread, the two share '
+              "one: Python's interpreter lock); false = a thread. Changing it, or method "
+              'between a slow and a fast one, at run time restarts the body ids.',
+              scope='node'),
     ParamSpec('warn_period', float, 5.0,
               'Minimum seconds between two warnings about the same kind of bad input.',
               range=(0.0, 3600.0), scope='node'),

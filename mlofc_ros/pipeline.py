@@ -31,7 +31,8 @@ from collections import deque
 import math
 import statistics
 import time
-from typing import Any, Deque, Dict, FrozenSet, List, Mapping, Optional, Sequence, Set, Tuple
+from typing import (Any, Deque, Dict, FrozenSet, List, Mapping, NamedTuple, Optional, Sequence,
+                    Set, Tuple)
 
 from mlofc_ros import params as _params
 from mlofc_ros.bodies import BodyTracker, relabel
@@ -57,6 +58,29 @@ MIN_BODY_TRACKS = 4
 #: With no calibration, the focal length starts at the median of this many window estimates
 #: (each from a solve with f unknown), then is refined from non-overlapping windows.
 FOCAL_SAMPLES = 8
+
+
+class RunningFit(NamedTuple):
+    """The last solve's answer, for :meth:`Pipeline.carry` (replaced in one assignment)."""
+
+    epoch: int                       # Observation.epoch of the solved frame
+    track_ids: np.ndarray            # (M,) uint32, the solved frame's tracks
+    labels: np.ndarray               # (M,) int32, their stable body ids (-1 none)
+    focal_length: float              # px
+    focal_log_sigma: float           # standard deviation of ln f
+    n_bodies: int                    # bodies reported per frame at that solve
+
+
+class SolveState(NamedTuple):
+    """
+    What a solve hands to the observing side (:meth:`Pipeline.solve_state`).
+
+    ``running``: the answer to carry to unsolved frames; ``focal``: the focal length the next
+    observations are given, ``(f px, std of ln f)``, None while unknown.
+    """
+
+    running: Optional[RunningFit]
+    focal: Optional[Tuple[float, float]]
 
 
 def make_tracker(params: Mapping[str, Any]) -> LineTracker:
@@ -113,11 +137,10 @@ class Pipeline:
         # 'lines' (the caller's, observe_lines); None until the first frame
         self._source: Optional[str] = None
         # restarts of track or body ids seen by observe (Observation.epoch), and the last
-        # solve's labels by track id for carry(): (epoch, track ids, stable ids, focal length,
-        # its std of ln f), replaced in one assignment by the solving thread, read by the
-        # observing one
+        # solve's labels by track id for carry(), replaced in one assignment by the solving
+        # thread, read by the observing one
         self._epoch = 0
-        self._running: Optional[Tuple[int, np.ndarray, np.ndarray, float, float]] = None
+        self._running: Optional[RunningFit] = None
 
     # --- configuration -------------------------------------------------------------------
 
@@ -540,12 +563,14 @@ class Pipeline:
         """
         t0 = time.perf_counter()
         running = self._running
-        fields = unsolved_fields(obs, self.n_bodies)
+        current = running is not None and running.epoch == obs.epoch and not obs.skipped
+        fields = unsolved_fields(obs, running.n_bodies if current else self.n_bodies)
         focal = focal_log_sigma = math.nan             # the last solve's estimate, if any
-        if running is not None and running[0] == obs.epoch and not obs.skipped:
-            labels = lookup(obs.track_ids, running[1], running[2], -1).astype(np.int32)
+        if current:
+            labels = lookup(obs.track_ids, running.track_ids, running.labels,
+                            -1).astype(np.int32)
             fields.update(labels=labels, carried=labels >= 0)
-            focal, focal_log_sigma = running[3], running[4]
+            focal, focal_log_sigma = running.focal_length, running.focal_log_sigma
         if obs.intrinsics is not None:
             focal, focal_log_sigma = float(obs.intrinsics[0]), obs.focal_log_sigma
         rays = segment_rays(obs.segments if obs.undistorted is None else obs.undistorted,
@@ -558,6 +583,36 @@ class Pipeline:
             focal_log_sigma=focal_log_sigma,
             frame_interval=obs.frame_interval, n_tracks=int(len(obs.win_ids)), rays=rays,
             skipped=obs.skipped, **fields)
+
+    def solve_state(self) -> SolveState:
+        """
+        Return what the solves so far hand to the observing side.
+
+        For a solve side in another process (:class:`~mlofc_ros.solve_process.SolveProcess`):
+        the observing pipeline :meth:`adopt` s it after every solve, so that :meth:`carry` and
+        the focal length of the next observations follow the remote solves.
+        """
+        return SolveState(self._running, self._focal_now)
+
+    def adopt(self, state: SolveState) -> None:
+        """Take the answer and focal length of solves run by another pipeline (see above)."""
+        running = state.running
+        if running is None or running.epoch == self._epoch:
+            self._focal_now = state.focal
+        # else: solved before a restart seen here (an image of another size: f for that)
+        self._running = running
+
+    def forget_solves(self) -> None:
+        """
+        Restart the solve side from the next observation: body ids, warm starts, the count.
+
+        For a caller that moves the solving elsewhere (another process, or back): the next
+        observation resets the bodies and the focal estimate of whichever side solves it, and
+        nothing is carried from solves before it.
+        """
+        self._pending_resets |= {'bodies', 'focal'}
+        self._running = None
+        self._focal_now = None
 
     def _apply_resets(self, resets: FrozenSet[str]) -> None:
         """Reset the solve side as an observation asks (see :attr:`Observation.resets`)."""
@@ -664,8 +719,8 @@ class Pipeline:
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)
         labels, carried = self._segment_labels(obs, res.labels, mapping)
-        self._running = (obs.epoch, np.array(obs.track_ids), labels, float(res.focal_length),
-                         focal_log_sigma)
+        self._running = RunningFit(obs.epoch, np.array(obs.track_ids), labels,
+                                   float(res.focal_length), focal_log_sigma, n_out)
         self._refine_focal(obs, res, problems)
         residuals = lookup(obs.track_ids, obs.win_ids,
                            np.asarray(res.residuals, dtype=np.float32), np.nan)
@@ -706,9 +761,10 @@ class Pipeline:
         be biased). A rotation-only method's estimate stays at its start, not observable.
         """
         # not from an image of another size than the tracker's now: solved late (the node's
-        # solver worker) it would estimate f for the new size
-        if obs.image_size != self._image_size or (obs.intrinsics is not None
-                                                  and obs.focal_log_sigma == 0.0):
+        # solver worker) it would estimate f for the new size (a solve side in another
+        # process does not track: adopt() keeps such an estimate out)
+        if ((self._image_size is not None and obs.image_size != self._image_size)
+                or (obs.intrinsics is not None and obs.focal_log_sigma == 0.0)):
             return
         focal = float(res.focal_length)
         if obs.intrinsics is None:

@@ -121,7 +121,8 @@ def test_live_quick_writes_report(tmp_path: pathlib.Path) -> None:
     # every frame that reached the node was tracked; the solver answered some of them, the
     # running fit some of the others
     assert published == 15 and answered >= 1 and dropped == 0
-    assert carried <= unsolved and answered - carried + unsolved <= published
+    # (carried: also frames answered while being solved, whose own cloud came late)
+    assert carried <= answered <= published
 
 
 def test_ros_headline_names_the_limit_or_says_it_is_above() -> None:

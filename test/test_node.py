@@ -261,17 +261,22 @@ def test_in_process_slow_solver_tracks_every_frame_and_solves_the_newest(ros):
         # the tracker saw every frame that arrived; only the solver skipped some, answered
         # from the running fit once a solve had labelled their tracks
         assert len(observed) == s['received'] and s['dropped'] == s['unsolved'] > 0
-        assert 0 < s['carried'] <= s['unsolved']
+        # carried: the unsolved frames and those still being solved when a newer one was
+        # answered (their own cloud late)
+        assert 0 < s['carried'] <= s['unsolved'] + s['late']
         stamps = [stamp_of(c) for c in clouds]
         assert stamps == sorted(set(stamps)) and stamps[-1] == round(observed[-1], 6)
-        carried = [c for c in clouds if stamp_of(c) not in solved_stamps]
+        # NaN residuals: carried, or the first frame (no window to solve yet)
+        carried = [c for c in clouds[1:] if np.all(np.isnan(parse_segments_msg(c)[3]))]
         assert len(carried) == s['carried']
-        assert all(np.all(np.isnan(parse_segments_msg(c)[3])) for c in carried)
+        assert all(stamp_of(c) in solved_stamps for c in clouds if c not in carried)
         assert len(clouds) == s['processed'] - s['late'] + s['carried'] > s['carried']
+        # every frame is answered once a solve labelled its tracks (the first few wait)
+        assert len(clouds) >= s['received'] - 6, (len(clouds), s)
         # the solved frames are segmented as well as when every frame is solved
         index = {round(t, 6): i for i, t in enumerate(seq.stamps)}
         by_stamp = {i: {stamp_of(m): parse_twist_msg(m)[0] for m in twists[i]} for i in twists}
-        solved_clouds = [c for c in clouds if stamp_of(c) in solved_stamps]
+        solved_clouds = [c for c in clouds if c not in carried]
         solved = [index[stamp_of(c)] for c in solved_clouds]
         results = []
         for cloud in solved_clouds:

@@ -19,6 +19,7 @@ Every test runs MlofcNode in process next to a test node over real DDS; warnings
 ``/rosout`` as any ROS tool would see them, the node's health from ``/diagnostics``.
 """
 import math
+import os
 import time
 from typing import Dict, List
 
@@ -126,7 +127,7 @@ class Harness(DdsHarness):
         assert s['processed'] + s['dropped'] + s['skipped'] + s['errors'] == s['received'], s
         assert s['errors'] == 0, s
         assert len(self.clouds) == s['processed'] - s['late'] + s['carried'], s
-        assert s['carried'] <= s['unsolved'] <= s['dropped'], s
+        assert s['carried'] <= s['unsolved'] + s['late'] and s['unsolved'] <= s['dropped'], s
         stamps = [(c.header.stamp.sec, c.header.stamp.nanosec) for c in self.clouds]
         assert all(a < b for a, b in zip(stamps, stamps[1:])) or s['carried'] == 0, stamps
         return s
@@ -534,3 +535,38 @@ def test_a_body_with_too_few_tracks_gets_no_twist(monkeypatch):
     assert pipeline_module.MIN_BODY_TRACKS == 4
     for r in results[1:]:
         assert r.body_valid.tolist().count(True) == 1, r.body_valid
+
+
+# --- where the solver runs ---------------------------------------------------------------------
+
+
+def test_a_slow_method_solves_in_a_child_process_and_moves_back_on_a_method_change(harness):
+    seq = small_sequence(12)
+    h = harness('/rob_proc', method='general', window=5, focal_length=300.0, warn_period=0.0)
+    diag = h.collect(DiagnosticArray, '/diagnostics')
+    name = 'rob_proc/mlofc: pipeline'
+
+    def solver() -> str:
+        got = statuses(diag, name)
+        return {v.key: v.value for v in got[-1].values}['solver'] if got else ''
+    assert h.wait(lambda: solver().startswith('child process '), 5.0), solver()
+    pid = int(solver().split()[-1])
+    clouds = [parse_segments_msg(h.frame(image_msg(seq.frames[k], seq.stamps[k])))[2]
+              for k in range(6)]
+    assert h.mlofc.stats['processed'] == 6 and np.sum(clouds[-1] >= 0) > 10
+    # a fast method solves here again: the child ends, the body ids restart
+    assert h.set_params(method='robust')[0].successful
+    labels = parse_segments_msg(h.frame(image_msg(seq.frames[6], seq.stamps[6])))[2]
+    assert np.sum(labels >= 0) > 10
+    assert h.wait(lambda: solver() == 'thread', 5.0), solver()
+    assert h.wait(lambda: not os.path.exists(f'/proc/{pid}'), 5.0)   # reaped, not a zombie
+    # and back; solver_process:=false keeps a slow method here
+    assert h.set_params(method='general')[0].successful
+    h.frame(image_msg(seq.frames[7], seq.stamps[7]))
+    assert h.wait(lambda: solver().startswith('child process '), 5.0), solver()
+    assert h.set_params(solver_process=False)[0].successful
+    for k in range(8, 12):
+        h.frame(image_msg(seq.frames[k], seq.stamps[k]))
+    assert h.wait(lambda: solver() == 'thread', 5.0), solver()
+    s = h.accounting()
+    assert s['processed'] == 12 and not h.warnings('failed'), (s, h.warnings('failed'))

@@ -58,6 +58,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--rates', default='10,30', help='publishing rates, Hz')
     ap.add_argument('--method', default='general')
     ap.add_argument('--window', type=int, default=10)
+    ap.add_argument('--param', action='append', default=[], metavar='NAME:=VALUE',
+                    help='another node parameter (repeatable), e.g. solver_process:=false')
     ap.add_argument('--frames', type=int, default=300, help='frames per scene (300: 10 s)')
     ap.add_argument('--startup-timeout', type=float, default=90.0)
     ap.add_argument('--drain-timeout', type=float, default=120.0)
@@ -155,6 +157,8 @@ def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
     stats_path = work / f'stats_{domain}.json'
     ros_args = ['-p', f'num_bodies:={n_bodies}', '-p', f'method:={args.method}',
                 '-p', f'window:={args.window}', '-p', 'queue_size:=2']
+    for item in args.param:
+        ros_args += ['-p', item]
     with bench_ros.running_node(ros_args, domain, stats_path, work / f'node_{domain}.log',
                                 lambda: LiveBench(args, domain, n_bodies),
                                 args.startup_timeout) as (bench, proc, _, _):
@@ -254,7 +258,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         common.run_header('Spinning boxes through the running node, published in real time',
                           common.command_line('live', argv), {
                               'Node': f'`method:={args.method} window:={args.window} '
-                                      'queue_size:=2`, camera_info given; a fresh node per run',
+                                      f'queue_size:=2{"".join(" " + p for p in args.param)}`, '
+                                      'camera_info given; a fresh node per run',
                               'Sequences': f'{args.frames} frames 640x480 per run (image '
                                            'stamps 30 frames/s), published at each rate on a '
                                            'steady clock',

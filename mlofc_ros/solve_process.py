@@ -1,0 +1,179 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+The solve half of a :class:`~mlofc_ros.pipeline.Pipeline` in a child process.
+
+Python runs one thread at a time in a process, and the solver of a slow method (``general``)
+is mostly short numpy calls that hold the interpreter: in a thread beside the tracking it got
+about half a core. In a child process it gets a core of its own, and the tracking the
+interpreter of the parent. The observing pipeline (parent) tracks and windows every frame as
+before; :meth:`SolveProcess.solve` sends an :class:`~mlofc_ros.frame.Observation` (without
+its image) to a pipeline in the child that only solves, waits for its
+:class:`~mlofc_ros.frame.FrameResult`, and hands the child's
+:class:`~mlofc_ros.pipeline.SolveState` (the running fit for carried frames, the focal length)
+to the parent. The solve side's state (body ids, warm starts, count, focal estimate) lives in
+the child.
+
+Example::
+
+    pipe = Pipeline(method='general', window=10)
+    with SolveProcess(pipe.params) as remote:
+        for gray, t in frames:
+            r = remote.solve(pipe.observe(gray, t), pipe)
+"""
+import dataclasses
+import multiprocessing
+import signal
+from typing import Any, Dict, Mapping, Optional, Tuple
+
+from mlofc_ros.frame import FrameResult, Observation
+from mlofc_ros.pipeline import Pipeline
+
+#: Seconds to wait for the child to end on :meth:`SolveProcess.close` before killing it.
+CLOSE_TIMEOUT = 5.0
+
+
+class SolverProcessError(RuntimeError):
+    """The child process failed (an exception in it, or it ended); see the message."""
+
+
+class SolverProcessEnded(SolverProcessError):
+    """The child process ended (killed, crashed); a new one was started."""
+
+
+def _serve(conn: Any, params: Dict[str, Any]) -> None:
+    """Child: solve the observations received on ``conn`` until told to stop or it closes."""
+    # a terminal's Ctrl-C reaches the whole process group: the parent decides when to stop
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    pipeline = Pipeline(**params)
+    while True:
+        try:
+            request, payload = conn.recv()
+        except (EOFError, OSError):
+            return                                      # the parent is gone
+        if request == 'stop':
+            return
+        try:
+            if request == 'solve':
+                reply: Any = (pipeline.solve(payload), pipeline.solve_state())
+            elif request == 'reconfigure':
+                pipeline.reconfigure(**payload)
+                reply = None
+            else:
+                raise ValueError(f'unknown request {request!r}')
+        except Exception as exc:  # noqa: B902 (reported to the parent, the child lives on)
+            conn.send(('error', f'{type(exc).__name__}: {exc}'))
+            continue
+        conn.send(('ok', reply))
+
+
+class SolveProcess:
+    """
+    A child process that solves a pipeline's observations (see the module docstring).
+
+    ``params``: the pipeline's parameters (``Pipeline.params``). The child is started at
+    once (it imports the package: about a second); the first :meth:`solve` waits for it. Use
+    from one thread at a time; :meth:`close` (or the ``with`` block) ends the child, which
+    also ends when the parent does.
+    """
+
+    def __init__(self, params: Mapping[str, Any]) -> None:
+        self._params = dict(params)
+        self._closed = False
+        self._conn: Any = None
+        self._process: Optional[multiprocessing.process.BaseProcess] = None
+        self._start()
+
+    def _start(self) -> None:
+        # spawn, not fork: the parent runs threads (DDS, the node's workers) whose locks a
+        # forked child would inherit held
+        ctx = multiprocessing.get_context('spawn')
+        self._conn, child = ctx.Pipe()
+        self._process = ctx.Process(target=_serve, args=(child, self._params),
+                                    name='mlofc_solver', daemon=True)
+        self._process.start()
+        child.close()
+
+    def _call(self, request: str, payload: Any) -> Any:
+        try:
+            self._conn.send((request, payload))
+            status, reply = self._conn.recv()
+        except (EOFError, OSError) as exc:
+            code = self._process.exitcode if self._process is not None else None
+            if self._closed:
+                raise SolverProcessError('the solver process was closed') from None
+            self._stop(kill=True)
+            self._start()
+            raise SolverProcessEnded(f'the solver process ended (exit code {code}: '
+                                     f'{type(exc).__name__}); restarted') from None
+        if status == 'error':
+            raise SolverProcessError(f'in the solver process: {reply}')
+        return reply
+
+    def solve(self, obs: Observation, pipeline: Pipeline) -> FrameResult:
+        """
+        Solve ``obs`` (from ``pipeline.observe``) in the child; hand its state to ``pipeline``.
+
+        Like ``pipeline.solve(obs)``, with the solve side in the child. Raises
+        :class:`SolverProcessError` when the child fails; a child that ended is restarted
+        and ``pipeline`` told to forget the solves (body ids restart).
+        """
+        try:
+            result, state = self._call('solve', dataclasses.replace(obs, gray=None))
+        except SolverProcessEnded:
+            pipeline.forget_solves()        # the new child starts without the solve state
+            raise
+        pipeline.adopt(state)
+        return result
+
+    def reconfigure(self, **changes: Any) -> None:
+        """Apply :meth:`Pipeline.reconfigure` in the child (the caller's own pipeline too)."""
+        self._call('reconfigure', changes)
+        self._params.update(changes)        # accepted: a restarted child starts with them
+
+    @property
+    def alive(self) -> bool:
+        """Return whether the child process runs."""
+        return self._process is not None and self._process.is_alive()
+
+    @property
+    def pid(self) -> Optional[int]:
+        """Return the child's process id (None once closed)."""
+        return None if self._process is None else self._process.pid
+
+    def _stop(self, kill: bool = False) -> None:
+        process, self._process = self._process, None
+        if process is None:
+            return
+        if not kill:
+            try:
+                self._conn.send(('stop', None))
+            except (OSError, ValueError):
+                pass
+            process.join(CLOSE_TIMEOUT)
+        if process.is_alive():
+            process.kill()
+            process.join(CLOSE_TIMEOUT)
+        self._conn.close()
+
+    def close(self) -> None:
+        """End the child process (idempotent)."""
+        self._closed = True
+        self._stop()
+
+    def __enter__(self) -> 'SolveProcess':
+        return self
+
+    def __exit__(self, *exc: Tuple[Any, ...]) -> None:
+        self.close()

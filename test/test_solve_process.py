@@ -1,0 +1,83 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""The solve side of a pipeline in a child process (mlofc_ros.solve_process)."""
+from mlofc_ros.pipeline import FOCAL_SAMPLES, Pipeline
+from mlofc_ros.solve_process import SolveProcess, SolverProcessEnded, SolverProcessError
+import numpy as np
+import pytest
+from test_pipeline import small_sequence
+
+
+def test_a_child_solves_as_the_pipeline_itself_and_hands_back_its_state():
+    seq = small_sequence(8)
+    params = {'num_bodies': 2, 'window': 5, 'method': 'general', 'focal_length': 300.0}
+    here, observing = Pipeline(**params), Pipeline(**params)
+    with SolveProcess(observing.params) as remote:
+        assert remote.alive
+        for k, (gray, t) in enumerate(zip(seq.frames[:7], seq.stamps[:7])):
+            a = here.process(gray, t)
+            b = remote.solve(observing.observe(gray, t), observing)
+            # the same solve, the same answer
+            np.testing.assert_array_equal(a.labels, b.labels)
+            np.testing.assert_array_equal(a.body_valid, b.body_valid)
+            np.testing.assert_allclose(a.angular_velocities, b.angular_velocities)
+        # the observing pipeline carries the child's last answer to the next frame
+        ca = here.carry(here.observe(seq.frames[7], seq.stamps[7]))
+        cb = observing.carry(observing.observe(seq.frames[7], seq.stamps[7]))
+        assert np.sum(cb.carried) > 10
+        np.testing.assert_array_equal(ca.labels, cb.labels)
+        pid = remote.pid
+    assert not remote.alive and remote.pid is None and pid is not None
+    remote.close()                                      # idempotent
+
+
+def test_an_unknown_focal_length_estimated_in_the_child_reaches_the_observations():
+    seq = small_sequence(FOCAL_SAMPLES + 3)
+    observing = Pipeline(num_bodies=2, window=3)
+    with SolveProcess(observing.params) as remote:
+        focals = []
+        for gray, t in zip(seq.frames, seq.stamps):
+            obs = observing.observe(gray, t)
+            focals.append(None if obs.intrinsics is None else obs.intrinsics[0])
+            r = remote.solve(obs, observing)
+        # the child starts its estimate after FOCAL_SAMPLES solves; the observing side then
+        # gives it to the next observations
+        assert focals[0] is None and focals[-1] is not None
+        assert focals[-1] == pytest.approx(r.focal_length)
+
+
+def test_a_failing_child_is_reported_and_a_dead_one_restarted():
+    seq = small_sequence(6)
+    observing = Pipeline(num_bodies=2, window=3, focal_length=300.0)
+    with SolveProcess(observing.params) as remote:
+        for gray, t in zip(seq.frames[:3], seq.stamps[:3]):
+            remote.solve(observing.observe(gray, t), observing)
+        # an error in the child: reported, the child goes on
+        with pytest.raises(SolverProcessError, match='window'):
+            remote.reconfigure(window=1)
+        assert remote.alive
+        epoch = observing.observe(seq.frames[3], seq.stamps[3]).epoch
+        # the child dies: the solve fails with the reason, a new child takes over, and
+        # the observing side restarts the body ids (the state died with the child)
+        old = remote.pid
+        remote._process.kill()
+        remote._process.join(5.0)
+        obs = observing.observe(seq.frames[4], seq.stamps[4])
+        with pytest.raises(SolverProcessEnded, match='ended'):
+            remote.solve(obs, observing)
+        assert remote.alive and remote.pid != old
+        obs = observing.observe(seq.frames[5], seq.stamps[5])
+        assert 'bodies' in obs.resets and obs.epoch > epoch
+        r = remote.solve(obs, observing)
+        assert r.problem is None and np.sum(r.labels >= 0) > 10
