@@ -35,6 +35,11 @@ import numpy as np
 #: Largest number of candidate assignments searched exhaustively (8! = 40320).
 MAX_EXACT = 40320
 
+#: A new body (``update(new=...)``) gets the smallest id that no body held in the last
+#: REUSE_AFTER_S seconds of stamps, so that a long run of bodies coming and going keeps the
+#: ids (and the node's twist topics) bounded, and no id means two bodies within a minute.
+REUSE_AFTER_S = 60.0
+
 
 @functools.lru_cache(maxsize=None)
 def _permutations(k: int, r: int) -> np.ndarray:
@@ -113,6 +118,7 @@ class BodyTracker:
         """Forget everything: the next window is numbered afresh."""
         self.forget_tracks()
         self._omegas: Dict[int, np.ndarray] = {}
+        self._seen: Dict[int, float] = {}          # stable id -> last stamp a body held it
         self.n_slots = 0
 
     def forget_tracks(self) -> None:
@@ -155,7 +161,8 @@ class BodyTracker:
                valid: Optional[np.ndarray] = None,
                positions: Optional[np.ndarray] = None,
                new: Sequence[int] = (),
-               keeps: Optional[Dict[int, int]] = None) -> np.ndarray:
+               keeps: Optional[Dict[int, int]] = None,
+               stamp: Optional[float] = None) -> np.ndarray:
         """
         Match this window's bodies to the stable ones and remember the result.
 
@@ -175,10 +182,13 @@ class BodyTracker:
             the image, objects do not); otherwise by decreasing track count.
         new : sequence of int
             Solver bodies known to be new (the automatic count found one more): each gets an
-            id never used before, whatever its tracks' histories (they were on another body).
+            id no body held in the last :data:`REUSE_AFTER_S` seconds (with ``stamp``; else
+            one never used), whatever its tracks' histories (they were on another body).
         keeps : dict of int to int, optional
             ``{solver body: stable id}`` known to continue that id (two bodies merged, the
             older id kept): the pair's score gains 1, a whole history.
+        stamp : float, optional
+            Time of the window (s), for the reuse of ids by new bodies.
 
         Returns
         -------
@@ -213,11 +223,30 @@ class BodyTracker:
             fresh[[b for b in new if 0 <= b < n]] = True
             mapping = np.empty(n, dtype=np.int64)
             mapping[~fresh] = assign(score[~fresh])
-            # fresh ids: beyond every id in use or ever used
-            mapping[fresh] = max(self.n_slots, int(mapping[~fresh].max(initial=-1)) + 1) \
-                + np.arange(int(fresh.sum()))
+            mapping[fresh] = self._fresh_ids(int(fresh.sum()), mapping[~fresh], stamp)
         self._remember(ids, lab, w, valid, mapping)
+        if stamp is not None:
+            self._seen.update(dict.fromkeys(mapping.tolist(), float(stamp)))
         return mapping
+
+    def _fresh_ids(self, k: int, taken: np.ndarray, stamp: Optional[float]) -> np.ndarray:
+        """
+        ``k`` ids for new bodies: retired ones first (unheld for REUSE_AFTER_S), then new ones.
+
+        A retired id's past (its tracks' votes, its angular velocity) is forgotten.
+        """
+        busy = set(taken.tolist())
+        retired = [] if stamp is None else [
+            j for j in range(self.n_slots)
+            if j not in busy and stamp - self._seen.get(j, -math.inf) >= REUSE_AFTER_S]
+        out = retired[:k]
+        for j in out:
+            if self._track_votes.shape[1] > j:
+                self._track_votes[:, j] = 0
+            self._track_labels[self._track_labels == j] = -1
+            self._omegas.pop(j, None)
+        start = max(self.n_slots, int(taken.max(initial=-1)) + 1)
+        return np.asarray(out + list(range(start, start + k - len(out))), dtype=np.int64)
 
     @staticmethod
     def _size(lab: np.ndarray, counts: np.ndarray, n: int,

@@ -96,7 +96,8 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
     ParamSpec('num_bodies', int, 2,
               'Number of independently moving rigid bodies, the static background counting as '
               'one; 0 = found from the scene and kept up as bodies start, stop and leave '
-              "(a new body gets a new id, one that stops the background's).",
+              '(a new body gets an id no body held in the last minute, one that stops the '
+              "background's).",
               range=(0, 8)),
     ParamSpec('window', int, 5,
               'Sliding window length in frames; the solver runs on the last `window` frames at '

@@ -706,7 +706,7 @@ class Pipeline:
                 body, current = self._count.kept
                 keeps = {body: int(self._counted_ids[current])}
         mapping = self.bodies.update(obs.win_ids, res.labels, omega, valid, positions=mid,
-                                     new=new, keeps=keeps)
+                                     new=new, keeps=keeps, stamp=obs.stamp)
         if counted:
             # the current bodies in the order of their stable ids: the older first
             self._counted_ids = np.sort(mapping)

@@ -117,6 +117,33 @@ def test_body_ids_of_a_new_body_and_a_merged_one():
     assert got[0] == 1
 
 
+def test_a_new_body_reuses_an_id_only_a_minute_after_its_last_body():
+    tracker = BodyTracker()
+    w3 = np.zeros((3, 3))
+    assert list(tracker.update(np.arange(60), np.repeat([0, 1, 2], 20), w3, stamp=0.0)) \
+        == [0, 1, 2]
+    tracker.update(np.arange(60), np.repeat([0, 1, 2], 20), w3, stamp=1.0)
+    # body 2 leaves (its tracks with it) after 1 s; two bodies go on
+    assert sorted(tracker.update(np.arange(40), np.repeat([0, 1], 20), w3[:2],
+                                 stamp=2.0)) == [0, 1]
+    # a new body within the minute: a new id, 2 having been held 59 s ago
+    got = tracker.update(np.arange(100, 160), np.repeat([0, 1, 2], 20), w3, new=[2],
+                         stamp=60.0)
+    assert got[2] == 3
+    # it leaves; a minute after 2 and 3 were last held, a new body takes the smallest
+    tracker.update(np.arange(100, 140), np.repeat([0, 1], 20), w3[:2], stamp=61.0)
+    got = tracker.update(np.arange(200, 260), np.repeat([0, 1, 2], 20), w3, new=[2],
+                         stamp=121.0)
+    assert got[2] == 2 and tracker.n_slots == 4
+    # never an id in use now, whatever the time
+    got = tracker.update(np.arange(300, 380), np.repeat([0, 1, 2, 3], 20),
+                         np.zeros((4, 3)), new=[3], stamp=500.0)
+    assert len(set(got.tolist())) == 4 and tracker.n_slots == 4
+    # without stamps new ids are never reused
+    got = BodyTracker().update(np.arange(20), np.repeat([0], 20), w3[:1])
+    assert list(got) == [0]
+
+
 def test_warm_motions_follow_the_stable_ids_of_the_counted_bodies():
     warm = WarmStarts()
     warm.motions = {4: (np.ones(3), np.zeros(3)), 7: (2 * np.ones(3), np.ones(3))}
