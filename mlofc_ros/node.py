@@ -445,10 +445,12 @@ class MlofcNode(Node):
         if wanted and self._remote is None:
             self._remote = SolveProcess(self._pipeline.params)
             self._pipeline.forget_solves()
+            self.get_logger().info(f'solving in a child process (pid {self._remote.pid})')
         elif not wanted and self._remote is not None:
             self._remote.close()
             self._remote = None
             self._pipeline.forget_solves()
+            self.get_logger().info('solving in the node process')
         elif self._remote is not None and changes:
             self._remote.reconfigure(**changes)
 

@@ -23,7 +23,9 @@ its image) to a pipeline in the child that only solves, waits for its
 :class:`~mlofc_ros.frame.FrameResult`, and hands the child's
 :class:`~mlofc_ros.pipeline.SolveState` (the running fit for carried frames, the focal length)
 to the parent. The solve side's state (body ids, warm starts, count, focal estimate) lives in
-the child.
+the child. The child is ``python -m mlofc_ros.solve_process`` (the parent's interpreter and
+environment) in a session of its own, talking over a socket pair: it ends when told to, or
+when the parent's end closes (the parent ended, however).
 
 Example::
 
@@ -33,12 +35,16 @@ Example::
             r = remote.solve(pipe.observe(gray, t), pipe)
 """
 import dataclasses
-import multiprocessing
+from multiprocessing.connection import Connection
 import signal
-from typing import Any, Dict, Mapping, Optional, Tuple
+import socket
+import subprocess
+import sys
+from typing import Any, Mapping, Optional, Tuple, TYPE_CHECKING
 
-from mlofc_ros.frame import FrameResult, Observation
-from mlofc_ros.pipeline import Pipeline
+if TYPE_CHECKING:                      # the child imports the pipeline after its signals
+    from mlofc_ros.frame import FrameResult, Observation
+    from mlofc_ros.pipeline import Pipeline
 
 #: Seconds to wait for the child to end on :meth:`SolveProcess.close` before killing it.
 CLOSE_TIMEOUT = 5.0
@@ -52,11 +58,13 @@ class SolverProcessEnded(SolverProcessError):
     """The child process ended (killed, crashed); a new one was started."""
 
 
-def _serve(conn: Any, params: Dict[str, Any]) -> None:
+def _serve(conn: Connection) -> None:
     """Child: solve the observations received on ``conn`` until told to stop or it closes."""
-    # a terminal's Ctrl-C reaches the whole process group: the parent decides when to stop
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    pipeline = Pipeline(**params)
+    from mlofc_ros.pipeline import Pipeline
+    try:
+        pipeline = Pipeline(**conn.recv())
+    except (EOFError, OSError):
+        return
     while True:
         try:
             request, payload = conn.recv()
@@ -83,7 +91,7 @@ class SolveProcess:
     A child process that solves a pipeline's observations (see the module docstring).
 
     ``params``: the pipeline's parameters (``Pipeline.params``). The child is started at
-    once (it imports the package: about a second); the first :meth:`solve` waits for it. Use
+    once (it imports numpy and OpenCV: about a second); the first :meth:`solve` waits for it. Use
     from one thread at a time; :meth:`close` (or the ``with`` block) ends the child, which
     also ends when the parent does.
     """
@@ -92,25 +100,29 @@ class SolveProcess:
         self._params = dict(params)
         self._closed = False
         self._conn: Any = None
-        self._process: Optional[multiprocessing.process.BaseProcess] = None
+        self._process: Optional[subprocess.Popen] = None
         self._start()
 
     def _start(self) -> None:
-        # spawn, not fork: the parent runs threads (DDS, the node's workers) whose locks a
-        # forked child would inherit held
-        ctx = multiprocessing.get_context('spawn')
-        self._conn, child = ctx.Pipe()
-        self._process = ctx.Process(target=_serve, args=(child, self._params),
-                                    name='mlofc_solver', daemon=True)
-        self._process.start()
-        child.close()
+        # a fresh interpreter (not a fork: the parent runs threads, DDS's and the node's, whose
+        # locks a fork would copy held) in a session of its own: a terminal's Ctrl-C reaches
+        # the node's process group, and the node decides when its solver stops. Talking over
+        # a socket pair, the child sees the parent end as the end of its input.
+        ours, theirs = socket.socketpair()
+        with theirs:
+            self._process = subprocess.Popen(
+                [sys.executable, '-m', 'mlofc_ros.solve_process', str(theirs.fileno())],
+                pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
+                start_new_session=True)
+        self._conn = Connection(ours.detach())
+        self._conn.send(self._params)
 
     def _call(self, request: str, payload: Any) -> Any:
         try:
             self._conn.send((request, payload))
             status, reply = self._conn.recv()
         except (EOFError, OSError) as exc:
-            code = self._process.exitcode if self._process is not None else None
+            code = self._process.poll() if self._process is not None else None
             if self._closed:
                 raise SolverProcessError('the solver process was closed') from None
             self._stop(kill=True)
@@ -121,7 +133,7 @@ class SolveProcess:
             raise SolverProcessError(f'in the solver process: {reply}')
         return reply
 
-    def solve(self, obs: Observation, pipeline: Pipeline) -> FrameResult:
+    def solve(self, obs: 'Observation', pipeline: 'Pipeline') -> 'FrameResult':
         """
         Solve ``obs`` (from ``pipeline.observe``) in the child; hand its state to ``pipeline``.
 
@@ -145,7 +157,7 @@ class SolveProcess:
     @property
     def alive(self) -> bool:
         """Return whether the child process runs."""
-        return self._process is not None and self._process.is_alive()
+        return self._process is not None and self._process.poll() is None
 
     @property
     def pid(self) -> Optional[int]:
@@ -159,12 +171,12 @@ class SolveProcess:
         if not kill:
             try:
                 self._conn.send(('stop', None))
-            except (OSError, ValueError):
+                process.wait(CLOSE_TIMEOUT)
+            except (OSError, ValueError, subprocess.TimeoutExpired):
                 pass
-            process.join(CLOSE_TIMEOUT)
-        if process.is_alive():
+        if process.poll() is None:
             process.kill()
-            process.join(CLOSE_TIMEOUT)
+            process.wait(CLOSE_TIMEOUT)
         self._conn.close()
 
     def close(self) -> None:
@@ -177,3 +189,9 @@ class SolveProcess:
 
     def __exit__(self, *exc: Tuple[Any, ...]) -> None:
         self.close()
+
+
+if __name__ == '__main__':
+    # the child (SolveProcess._start): argv[1] is the socket to the parent
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _serve(Connection(int(sys.argv[1])))

@@ -15,6 +15,7 @@
 """The node over real DDS: in-process next to a test node, and as the installed executable."""
 import os
 import pathlib
+import re
 import signal
 import subprocess
 import time
@@ -38,6 +39,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from test_pipeline import (evaluate, GOAL_MISCLASSIFIED, GOAL_OMEGA_ERROR, small_sequence,
                            two_box_sequence)
+from test_solve_process import running
 
 
 pytestmark = pytest.mark.ros
@@ -447,3 +449,6 @@ def test_a_second_ctrl_c_during_shutdown_leaves_no_traceback(ros):
         out = interrupt(proc, again_after=0.3)
     assert proc.returncode == 0, out
     assert 'Traceback' not in out and 'KeyboardInterrupt' not in out, out
+    # the solver's child process ended with the node
+    pid = int(re.search(r'solving in a child process \(pid (\d+)\)', out).group(1))
+    assert not running(pid), out

@@ -559,7 +559,7 @@ def test_a_slow_method_solves_in_a_child_process_and_moves_back_on_a_method_chan
     labels = parse_segments_msg(h.frame(image_msg(seq.frames[6], seq.stamps[6])))[2]
     assert np.sum(labels >= 0) > 10
     assert h.wait(lambda: solver() == 'thread', 5.0), solver()
-    assert h.wait(lambda: not os.path.exists(f'/proc/{pid}'), 5.0)   # reaped, not a zombie
+    assert h.wait(lambda: not os.path.exists(f'/proc/{pid}'), 5.0)   # ended and reaped
     # and back; solver_process:=false keeps a slow method here
     assert h.set_params(method='general')[0].successful
     h.frame(image_msg(seq.frames[7], seq.stamps[7]))

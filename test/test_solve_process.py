@@ -12,6 +12,11 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """The solve side of a pipeline in a child process (mlofc_ros.solve_process)."""
+import signal
+import subprocess
+import sys
+import time
+
 from mlofc_ros.pipeline import FOCAL_SAMPLES, Pipeline
 from mlofc_ros.solve_process import SolveProcess, SolverProcessEnded, SolverProcessError
 import numpy as np
@@ -72,7 +77,7 @@ def test_a_failing_child_is_reported_and_a_dead_one_restarted():
         # the observing side restarts the body ids (the state died with the child)
         old = remote.pid
         remote._process.kill()
-        remote._process.join(5.0)
+        remote._process.wait(5.0)
         obs = observing.observe(seq.frames[4], seq.stamps[4])
         with pytest.raises(SolverProcessEnded, match='ended'):
             remote.solve(obs, observing)
@@ -81,3 +86,34 @@ def test_a_failing_child_is_reported_and_a_dead_one_restarted():
         assert 'bodies' in obs.resets and obs.epoch > epoch
         r = remote.solve(obs, observing)
         assert r.problem is None and np.sum(r.labels >= 0) > 10
+
+
+def running(pid: int) -> bool:
+    """Whether process ``pid`` runs (ended: gone, or a zombie its new parent did not reap)."""
+    try:
+        with open(f'/proc/{pid}/stat') as f:
+            return f.read().rsplit(')', 1)[1].split()[0] != 'Z'
+    except FileNotFoundError:
+        return False
+
+
+def test_the_child_ends_with_its_parent_even_killed():
+    code = ('from mlofc_ros.solve_process import SolveProcess\n'
+            'import time\n'
+            'remote = SolveProcess({"num_bodies": 2})\n'
+            'print(remote.pid, flush=True)\n'
+            'time.sleep(60)\n')
+    parent = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True)
+    try:
+        pid = int(parent.stdout.readline())
+        assert running(pid)
+        parent.send_signal(signal.SIGKILL)
+        parent.wait(10.0)
+        deadline = time.monotonic() + 20.0
+        # orphaned, it sees the end of its input and exits
+        while running(pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not running(pid)
+    finally:
+        parent.kill()
+        parent.wait()
