@@ -24,7 +24,9 @@ comparable with the truth at any publishing rate.
 
 Scored like ``bench spinning`` (segments matched to true edges, stable body ids to true bodies
 by overlap; ``per frame``: the ids matched in every frame on its own, the segmentation without
-the id switches), on the answered frames from the window's ``window``-th frame on. Also reported:
+the id switches), on the answered frames from the window's ``window``-th frame on, and from
+frame :data:`SETTLED_FRAME` on (3 s: past the first search and the full solves after it at
+30 Hz). Also reported:
 the frames the node answered (``~/segments``), the frames it tracked but did not solve (the
 solver was busy; the node counts them as dropped, ``unsolved``), those of them it answered
 from the running fit (each segment labelled as its track was at the last solve,
@@ -48,6 +50,9 @@ from mlofc_tools.bench import spinning
 import numpy as np
 
 TWIST_TOPIC = '/' + bench_ros.NODE_NAME + '/body_{}/twist'
+#: Frames of the scene (30 frames/s stamps) after which a run counts as settled: the first
+#: search and the full solves after it take a few seconds at 30 Hz.
+SETTLED_FRAME = 90
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -178,7 +183,8 @@ def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
             'unsolved': int(stats.get('unsolved', 0)),
             'carried': int(stats.get('carried', 0)),
             'queue_dropped': int(stats.get('dropped', 0)) - int(stats.get('unsolved', 0)),
-            'score': _score(seq, got, scored), 'solved': _score(seq, got, solved)}
+            'score': _score(seq, got, scored), 'solved': _score(seq, got, solved),
+            'settled': _score(seq, got, [f for f in scored if f >= SETTLED_FRAME])}
 
 
 def _score(seq: Any, got: Sequence[Any], frames: Sequence[int]) -> Optional[Dict[str, Any]]:
@@ -233,8 +239,16 @@ def summary_rows(records: Sequence[Dict[str, Any]]) -> List[List[object]]:
                      float(np.mean([100 * r['solved']['wrong'] for r in rs if r['solved']]
                                    or [math.nan])),
                      float(np.mean([r['answered'] - r['carried'] for r in rs])
-                           / rs[0]['published'])])
+                           / rs[0]['published']),
+                     _mean_pct([r['settled'] for r in rs], 'wrong'),
+                     _mean_pct([r['settled'] for r in rs], 'unassigned')])
     return rows
+
+
+def _mean_pct(scores: Sequence[Optional[Dict[str, Any]]], key: str) -> float:
+    """Mean of ``100 * score[key]`` over the scores that exist (NaN for none)."""
+    values = [100 * sc[key] for sc in scores if sc]
+    return float(np.mean(values)) if values else math.nan
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -271,7 +285,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                'per frame (mean)', '-1 % (mean)',
                                'omega err % (median over boxes)', 'boxes with omega err <= 5%',
                                'answered share', 'wrong % of the solved frames (mean)',
-                               'solved share'],
+                               'solved share', f'wrong % from frame {SETTLED_FRAME} (mean)',
+                               f'-1 % from frame {SETTLED_FRAME} (mean)'],
                               summary_rows(records)),
         '',
         '## Every run',
