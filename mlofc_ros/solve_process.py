@@ -24,7 +24,7 @@ its image) to a pipeline in the child that only solves, waits for its
 :class:`~mlofc_ros.pipeline.SolveState` (the running fit for carried frames, the focal length)
 to the parent. The solve side's state (body ids, warm starts, count, focal estimate) lives in
 the child. The child is ``python -m mlofc_ros.solve_process`` (the parent's interpreter and
-environment) in a session of its own, talking over a socket pair: it ends when told to, or
+environment) in a process group of its own, talking over a socket pair: it ends when told to, or
 when the parent's end closes (the parent ended, however).
 
 Example::
@@ -105,15 +105,16 @@ class SolveProcess:
 
     def _start(self) -> None:
         # a fresh interpreter (not a fork: the parent runs threads, DDS's and the node's, whose
-        # locks a fork would copy held) in a session of its own: a terminal's Ctrl-C reaches
-        # the node's process group, and the node decides when its solver stops. Talking over
-        # a socket pair, the child sees the parent end as the end of its input.
+        # locks a fork would copy held) in a process group of its own: a terminal's Ctrl-C
+        # reaches the node's group, and the node decides when its solver stops (a session of
+        # its own would also schedule it apart from the node's: about 10% fewer frames
+        # solved in bench live, within its runs' spread). Over a socket pair the child sees the parent end as its input's end.
         ours, theirs = socket.socketpair()
         with theirs:
             self._process = subprocess.Popen(
                 [sys.executable, '-m', 'mlofc_ros.solve_process', str(theirs.fileno())],
                 pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
-                start_new_session=True)
+                process_group=0)
         self._conn = Connection(ours.detach())
         self._conn.send(self._params)
 
