@@ -108,7 +108,8 @@ class SolveProcess:
         # locks a fork would copy held) in a process group of its own: a terminal's Ctrl-C
         # reaches the node's group, and the node decides when its solver stops (a session of
         # its own would also schedule it apart from the node's: about 10% fewer frames
-        # solved in bench live, within its runs' spread). Over a socket pair the child sees the parent end as its input's end.
+        # solved in bench live, within its runs' spread). Over a socket pair the child sees
+        # the parent end as its input's end.
         ours, theirs = socket.socketpair()
         with theirs:
             self._process = subprocess.Popen(
