@@ -86,7 +86,7 @@ from mlofc_ros.messages.debug import draw_debug
 from mlofc_ros.pipeline import FrameResult, Observation, Pipeline
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
                                     segments_msg, stamp_to_seconds, twist_msg)
-from mlofc_ros.solve_process import SolveProcess
+from mlofc_ros.solve_process import SolveProcess, SolverProcessEnded
 from mlofc_ros.solver import get_method
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -109,6 +109,9 @@ PROBLEM_HOLD = 5.0
 #: The tracking worker solves a frame itself when the solver worker is idle and the last
 #: solve took less than this (s); otherwise the solver worker does, while tracking goes on.
 INLINE_SOLVE_S = 0.03
+#: After this many solver child processes in a row ended before a solve came back, the node
+#: solves in its own process (``solver_process``).
+REMOTE_ENDED_MAX = 3
 
 
 #: Most kinds of problem remembered for throttling (a flood of new kinds restarts the table).
@@ -206,6 +209,7 @@ class MlofcNode(Node):
         self._pipeline = Pipeline(**{k: values[k] for k in P.names('pipeline')})
         # the solve side in a child process (solver_process, a slow method), or None: here
         self._remote: Optional[SolveProcess] = None
+        self._remote_ended = 0              # children ended since the last remote solve
         self._place_solver({})
 
         out_qos = QoSProfile(depth=OUTPUT_DEPTH)
@@ -444,6 +448,7 @@ class MlofcNode(Node):
                   and get_method(self._pipeline.params['method']).slow)
         if wanted and self._remote is None:
             self._remote = SolveProcess(self._pipeline.params)
+            self._remote_ended = 0
             self._pipeline.forget_solves()
             self.get_logger().info(f'solving in a child process (pid {self._remote.pid})')
         elif not wanted and self._remote is not None:
@@ -568,8 +573,23 @@ class MlofcNode(Node):
     def _solve(self, header: Any, obs: Observation, debug: bool) -> None:
         t = time.monotonic()
         remote = self._remote
-        result = (self._pipeline.solve(obs) if remote is None
-                  else remote.solve(obs, self._pipeline))
+        if remote is None:
+            result = self._pipeline.solve(obs)
+        else:
+            try:
+                result = remote.solve(obs, self._pipeline)
+            except SolverProcessEnded as exc:
+                self._remote_ended += 1
+                if self._remote_ended >= REMOTE_ENDED_MAX:
+                    # a child that cannot live (it cannot import, it is killed at once): not
+                    # a frame's failure, solve here (a solver_process or method change retries)
+                    self._remote = None
+                    remote.close()
+                    self.get_logger().error(
+                        f'the solver process ended {self._remote_ended} times in a row '
+                        f'({exc}): solving in the node process from now on')
+                raise
+            self._remote_ended = 0
         self._last_solve_s = time.monotonic() - t
         if result.problem:
             self._warn('pipeline', result.problem)

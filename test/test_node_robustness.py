@@ -27,6 +27,7 @@ import cv2
 from dds import DdsHarness, FRAME_ID, image_msg, stamp, stamp_of
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import TwistWithCovarianceStamped
+from mlofc_ros import node as node_module
 from mlofc_ros import pipeline as pipeline_module
 from mlofc_ros.image import image_msg_to_gray
 from mlofc_ros.node import MlofcNode
@@ -570,3 +571,24 @@ def test_a_slow_method_solves_in_a_child_process_and_moves_back_on_a_method_chan
     assert h.wait(lambda: solver() == 'thread', 5.0), solver()
     s = h.accounting()
     assert s['processed'] == 12 and not h.warnings('failed'), (s, h.warnings('failed'))
+
+
+def test_a_solver_process_that_keeps_dying_is_given_up_for_a_thread(harness):
+    seq = small_sequence(12)
+    h = harness('/rob_die', method='general', window=5, focal_length=300.0, warn_period=0.0)
+    for k in range(3):
+        h.frame(image_msg(seq.frames[k], seq.stamps[k]))
+    # the child dies: the frame fails (a warning), a new child takes over
+    for k in range(3, 3 + node_module.REMOTE_ENDED_MAX):
+        remote = h.mlofc._remote
+        assert remote is not None and remote.alive
+        os.kill(remote.pid, 9)
+        n = h.mlofc.stats['errors']
+        h.deliver(image_msg(seq.frames[k], seq.stamps[k]))
+        assert h.wait(lambda: h.mlofc.stats['errors'] > n and h.mlofc.pending_frames() == 0)
+    assert h.warnings('the solver process ended')
+    # ended every time: the node solves in its own process, and goes on
+    assert h.mlofc._remote is None and h.warnings('solving in the node process')
+    for k in range(3 + node_module.REMOTE_ENDED_MAX, 12):
+        labels = parse_segments_msg(h.frame(image_msg(seq.frames[k], seq.stamps[k])))[2]
+    assert np.sum(labels >= 0) > 10
