@@ -669,7 +669,7 @@ class Pipeline:
         except Exception as exc:  # noqa: B902 (a solver failure must not lose the frame)
             problems.append(f'solver failed: {type(exc).__name__}: {exc}')
             return None
-        self._warm.solved(method, res)
+        self._warm.solved(method, res, obs.stamp, obs.frame_interval)
         return res
 
     def _publish(self, obs: Observation, res: SegmentationResult, problems: List[str]

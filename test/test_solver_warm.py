@@ -97,7 +97,7 @@ def test_a_stream_of_general_solves_steps_between_full_solves():
     from mlofc_ros.solver.warm import FULL_AFTER_SEARCH, NOISE_JUMP, RESCAN_EVERY, WarmStarts
     warm, labels, n = WarmStarts(), np.zeros(6, dtype=np.int64), 2
 
-    def solve(start, sigma=0.5):
+    def solve(start, sigma=0.5, stamp=float('nan')):
         kw = warm.keywords(GENERAL, labels, n)
         res = SegmentationResult(
             labels=labels, angular_velocities=np.full((n, 3), 0.01),
@@ -107,7 +107,7 @@ def test_a_stream_of_general_solves_steps_between_full_solves():
             translation_directions=np.tile([0.0, 0.0, 1.0], (n, 1)),
             diagnostics=Diagnostics(start=start, sigma_px=sigma,
                                     translation_scales=np.full(n, 0.02)))
-        warm.solved(GENERAL, res)
+        warm.solved(GENERAL, res, stamp, 0.1)
         warm.remember(res, np.arange(n), np.ones(n, dtype=bool))
         return kw
 
@@ -127,3 +127,12 @@ def test_a_stream_of_general_solves_steps_between_full_solves():
     kw = solve('warm')                                   # after the jump: a full solve
     assert 'step' not in kw and kw['rescan'] == [0, 1]
     assert solve('step')['step']
+    # with stamps: full solves for the FULL_AFTER_SEARCH frames after a search, not solves
+    # (a solver slower than the camera solves fewer of them)
+    solve('spatial', stamp=10.0)
+    for k in range(1, FULL_AFTER_SEARCH + 1):      # one frame (0.1 s) apart: as before
+        assert 'step' not in solve('warm', stamp=10.0 + 0.1 * k)
+    assert solve('step', stamp=10.5)['step']
+    solve('spatial', stamp=20.0)
+    assert 'step' not in solve('warm', stamp=21.5)    # 15 frames later: one full solve
+    assert solve('step', stamp=21.6)['step']

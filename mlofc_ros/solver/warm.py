@@ -38,7 +38,11 @@ WARM_FLOOR_MARGIN = 0.05
 WARM_FLOOR_SOLVES = 10
 
 #: A method that takes ``step`` (a tracking step from the previous motions, no search) steps
-#: on every solve but these: the FULL_AFTER_SEARCH solves after a search are full solves with
+#: on every solve but these: the solves of the FULL_AFTER_SEARCH frames after a search (at
+#: most as many solves; one when the solver is slower than the camera, a live node at 30 Hz:
+#: bench live, 6 seeds, own2+bg / own3+bg, frames solved 22 / 15% -> 30 / 20%, unlabelled
+#: segments 24 / 33% -> 19 / 27%, wrong 5.5 / 7.8% -> 4.3 / 8.3%, worst 16.9 / 15.3% -> 8.8 /
+#: 13.7%, side by side) are full solves with
 #: every body rescanned from the pivot starts (a search often leaves a body in a wrong basin),
 #: and a step whose measured noise is above NOISE_JUMP times the last full solve's is followed
 #: by a full solve (the tracked motions no longer explain the window). Every RESCAN_EVERY-th
@@ -78,6 +82,7 @@ class WarmStarts:
         self.steps = 0                   # steps in a row; negative: full solves still due
         self.noise = math.inf            # the last full solve's noise (px)
         self.full_next = False
+        self.search_stamp = math.nan
 
     def keywords(self, method: Method, labels: Optional[np.ndarray], n: int,
                  ids: Optional[Sequence[int]] = None) -> Dict[str, Any]:
@@ -111,12 +116,14 @@ class WarmStarts:
             self.floor = (floor, left - 1) if left > 1 else None
         return out
 
-    def solved(self, method: Method, res: SegmentationResult) -> None:
+    def solved(self, method: Method, res: SegmentationResult, stamp: float = math.nan,
+               interval: float = math.nan) -> None:
         """
         Note a solve by ``method``: count steps, note the noise, lower the bar after a search.
 
         ``res``: its result; its ``diagnostics.start`` tells a step (``'step'``), a tracked
-        full solve (``'warm'``) and a search apart.
+        full solve (``'warm'``) and a search apart. ``stamp``: the window's newest frame (s),
+        ``interval``: the frame interval (s), to count the frames since a search.
         """
         start, noise = res.diagnostics.start, res.diagnostics.sigma_px
         if start == 'step':
@@ -126,6 +133,11 @@ class WarmStarts:
             self.noise, self.full_next = noise, False
             # after a search, full solves (every body rescanned) until FULL_AFTER_SEARCH
             self.steps = min(self.steps + 1, 0) if start == 'warm' else -FULL_AFTER_SEARCH
+            if start != 'warm':
+                self.search_stamp = stamp
+            elif self.steps < 0 and stamp - self.search_stamp >= (FULL_AFTER_SEARCH
+                                                                  - 0.5) * interval:
+                self.steps = 0          # the window moved FULL_AFTER_SEARCH frames on
         if method.accepts('warm_inliers') and res.diagnostics.warm_rejected:
             share = res.diagnostics.inlier_share or 0.0
             self.floor = (max(share - WARM_FLOOR_MARGIN, 0.0), WARM_FLOOR_SOLVES)
