@@ -447,7 +447,12 @@ class MlofcNode(Node):
         wanted = (self._values['solver_process']
                   and get_method(self._pipeline.params['method']).slow)
         if wanted and self._remote is None:
-            self._remote = SolveProcess(self._pipeline.params)
+            try:
+                self._remote = SolveProcess(self._pipeline.params)
+            except OSError as exc:
+                self.get_logger().error(f'cannot start the solver process ({exc}): solving '
+                                        'in the node process')
+                return
             self._remote_ended = 0
             self._pipeline.forget_solves()
             self.get_logger().info(f'solving in a child process (pid {self._remote.pid})')
