@@ -120,6 +120,11 @@ class SolveProcess:
         self._conn.send(self._params)
 
     def _call(self, request: str, payload: Any) -> Any:
+        if self._process is None and not self._closed:     # a restart failed: try again
+            try:
+                self._start()
+            except OSError as failed:
+                raise SolverProcessEnded(f'cannot start the solver process: {failed}') from None
         try:
             self._conn.send((request, payload))
             status, reply = self._conn.recv()
@@ -128,7 +133,12 @@ class SolveProcess:
             if self._closed:
                 raise SolverProcessError('the solver process was closed') from None
             self._stop(kill=True)
-            self._start()
+            try:
+                self._start()
+            except OSError as failed:
+                raise SolverProcessEnded(f'the solver process ended (exit code {code}: '
+                                         f'{type(exc).__name__}); cannot restart it: '
+                                         f'{failed}') from None
             raise SolverProcessEnded(f'the solver process ended (exit code {code}: '
                                      f'{type(exc).__name__}); restarted') from None
         if status == 'error':

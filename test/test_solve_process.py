@@ -117,3 +117,20 @@ def test_the_child_ends_with_its_parent_even_killed():
     finally:
         parent.kill()
         parent.wait()
+
+
+def test_a_child_that_cannot_be_restarted_is_reported_at_every_solve(monkeypatch):
+    seq = small_sequence(4)
+    observing = Pipeline(num_bodies=2, window=3, focal_length=300.0)
+    with SolveProcess(observing.params) as remote:
+        remote.solve(observing.observe(seq.frames[0], seq.stamps[0]), observing)
+        remote._process.kill()
+        remote._process.wait(5.0)
+        monkeypatch.setattr(sys, 'executable', '/nonexistent/python')
+        with pytest.raises(SolverProcessEnded, match='cannot restart'):
+            remote.solve(observing.observe(seq.frames[1], seq.stamps[1]), observing)
+        with pytest.raises(SolverProcessEnded, match='cannot start'):
+            remote.solve(observing.observe(seq.frames[2], seq.stamps[2]), observing)
+        monkeypatch.undo()
+        r = remote.solve(observing.observe(seq.frames[3], seq.stamps[3]), observing)
+        assert remote.alive and r.problem is None
