@@ -106,7 +106,7 @@ class SolveProcess:
     def _start(self) -> None:
         # a fresh interpreter (not a fork: the parent runs threads, DDS's and the node's, whose
         # locks a fork would copy held) in a process group of its own: a terminal's Ctrl-C
-        # reaches the node's group, and the node decides when its solver stops (a session of
+        # reaches the node's group, and the node decides when its solver stops (a Unix session of
         # its own would also schedule it apart from the node's: about 10% fewer frames
         # solved in bench live, within its runs' spread). Over a socket pair the child sees
         # the parent end as its input's end.
