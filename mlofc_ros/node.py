@@ -559,8 +559,6 @@ class MlofcNode(Node):
                 self._solving = True
                 self._in_solve = (header, obs)
             self._solve_guarded(header, obs, debug)
-            with self._lock:
-                self._in_solve = None
 
     def _solve_guarded(self, header: Any, obs: Observation, debug: bool) -> None:
         """Solve and publish (``_solving`` set by the caller); count and warn on failure."""
@@ -573,6 +571,7 @@ class MlofcNode(Node):
         finally:
             with self._lock:
                 self._solving = False
+                self._in_solve = None
                 self._solve_wake.notify_all()
 
     def _solve(self, header: Any, obs: Observation, debug: bool) -> None:

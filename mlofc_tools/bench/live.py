@@ -231,13 +231,12 @@ def summary_rows(records: Sequence[Dict[str, Any]]) -> List[List[object]]:
         err = np.concatenate([np.asarray(r['score']['omega_err']) for r in rs])
         err = err[np.isfinite(err)]
         rows.append([scene, rate, len(rs), float(np.mean(wrong)), float(np.max(wrong)),
-                     float(np.mean([100 * r['score']['wrong_frame'] for r in rs])),
-                     float(np.mean([100 * r['score']['unassigned'] for r in rs])),
+                     _mean_pct([r['score'] for r in rs], 'wrong_frame'),
+                     _mean_pct([r['score'] for r in rs], 'unassigned'),
                      100 * float(np.median(err)) if err.size else math.nan,
                      float(np.mean(err <= 0.05)) if err.size else math.nan,
                      float(np.mean([r['answered'] / r['published'] for r in rs])),
-                     float(np.mean([100 * r['solved']['wrong'] for r in rs if r['solved']]
-                                   or [math.nan])),
+                     _mean_pct([r['solved'] for r in rs], 'wrong'),
                      float(np.mean([r['answered'] - r['carried'] for r in rs])
                            / rs[0]['published']),
                      _mean_pct([r['settled'] for r in rs], 'wrong'),
