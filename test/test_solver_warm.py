@@ -97,13 +97,13 @@ def test_a_stream_of_general_solves_steps_between_full_solves():
     from mlofc_ros.solver.warm import FULL_AFTER_SEARCH, NOISE_JUMP, RESCAN_EVERY, WarmStarts
     warm, labels, n = WarmStarts(), np.zeros(6, dtype=np.int64), 2
 
-    def solve(start, sigma=0.5, stamp=float('nan')):
+    def solve(start, sigma=0.5, stamp=float('nan'), w=0.01):
         kw = warm.keywords(GENERAL, labels, n)
         res = SegmentationResult(
             labels=labels, angular_velocities=np.full((n, 3), 0.01),
             angular_covariances=np.stack([np.eye(3)] * n), focal_length=500.0,
             residuals=np.zeros(6), costs=np.zeros((6, n)), method='general',
-            segmentation_angular_velocities=np.full((n, 3), 0.01),
+            segmentation_angular_velocities=np.full((n, 3), w),
             translation_directions=np.tile([0.0, 0.0, 1.0], (n, 1)),
             diagnostics=Diagnostics(start=start, sigma_px=sigma,
                                     translation_scales=np.full(n, 0.02)))
@@ -118,11 +118,11 @@ def test_a_stream_of_general_solves_steps_between_full_solves():
     # the translation is handed on with its scale
     assert np.allclose(kw['init_motions'][1], [[0.0, 0.0, 0.02]] * n)
     rescanned = []
-    for _ in range(4 * RESCAN_EVERY):
-        kw = solve('step')
+    for _ in range(2 * RESCAN_EVERY):
+        kw = solve('step', w=0.011)            # the steps refine the motions
         assert kw['step']
         rescanned += kw.get('rescan', [])
-    assert rescanned == [0, 1, 0, 1]                     # one body in turn
+    assert rescanned == [0, 1]                           # one body in turn
     assert solve('step', sigma=0.5 * NOISE_JUMP * 1.1)['step']
     kw = solve('warm')                                   # after the jump: a full solve
     assert 'step' not in kw and kw['rescan'] == [0, 1]
@@ -136,3 +136,56 @@ def test_a_stream_of_general_solves_steps_between_full_solves():
     solve('spatial', stamp=20.0)
     assert 'step' not in solve('warm', stamp=21.5)    # 15 frames later: one full solve
     assert solve('step', stamp=21.6)['step']
+
+
+def test_rescans_back_off_while_they_change_no_basin():
+    # one body rescanned in turn every RESCAN_EVERY steps; after each round of n rescans that
+    # moved no body to another basin the steps between them double, up to RESCAN_EVERY_MAX;
+    # a rescan that does, or any solve that is not a step, brings them back
+    from mlofc_ros.solver.methods import GENERAL
+    from mlofc_ros.solver.result import Diagnostics, SegmentationResult
+    from mlofc_ros.solver.warm import RESCAN_EVERY, RESCAN_EVERY_MAX, RESCAN_SWITCH, WarmStarts
+    warm, labels, n = WarmStarts(), np.zeros(6, dtype=np.int64), 2
+    w = np.full((n, 3), 0.02)
+
+    def solve(start):
+        kw = warm.keywords(GENERAL, labels, n)
+        res = SegmentationResult(
+            labels=labels, angular_velocities=w, angular_covariances=np.stack([np.eye(3)] * n),
+            focal_length=500.0, residuals=np.zeros(6), costs=np.zeros((6, n)),
+            method='general', segmentation_angular_velocities=w.copy(),
+            translation_directions=np.tile([0.0, 0.0, 1.0], (n, 1)),
+            diagnostics=Diagnostics(start=start, sigma_px=0.5,
+                                    translation_scales=np.full(n, 0.02)))
+        warm.solved(GENERAL, res)
+        warm.remember(res, np.arange(n), np.ones(n, dtype=bool))
+        return kw.get('rescan', []) if kw.get('step') else None
+
+    def steps_between(count):
+        at, k = [], 0
+        while len(at) < count:
+            k += 1
+            if solve('step'):
+                at.append(k)
+        return list(np.diff([0] + at))
+
+    solve('spatial')
+    for _ in range(3):
+        solve('warm')
+    # rounds of two rescans: 3, 3, then 6, 6, 12, 12, 24, 24, 24 ...
+    expected = [RESCAN_EVERY] * n + [2 * RESCAN_EVERY] * n + [4 * RESCAN_EVERY] * n
+    assert steps_between(3 * n) == expected
+    assert steps_between(3 * n) == [RESCAN_EVERY_MAX] * 3 * n
+    # a rescan that moves its body to another basin: back to RESCAN_EVERY
+    for k in range(RESCAN_EVERY_MAX):
+        if k == RESCAN_EVERY_MAX - 1:
+            w[:] = 0.02 * (1.0 + 2.0 * RESCAN_SWITCH)    # the rescanned body's new basin
+        got = solve('step')
+    assert got                                           # the rescan's step
+    assert steps_between(n) == [RESCAN_EVERY] * n
+    # refinements below RESCAN_SWITCH do not count as a basin change
+    w[:] *= 1.0 + 0.5 * RESCAN_SWITCH
+    assert steps_between(n) == [2 * RESCAN_EVERY] * n
+    # a full solve brings the rescans back too
+    solve('warm')
+    assert steps_between(n) == [RESCAN_EVERY] * n
