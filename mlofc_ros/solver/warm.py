@@ -84,9 +84,10 @@ class WarmStarts:
 
     Per stable body id the last motion the labels were made with (methods whose warm start
     is :attr:`WarmStart.MOTIONS`: rotation and translation with its scale), the schedule of
-    steps and full solves of a method that takes ``step`` (:data:`FULL_AFTER_SEARCH`), and
-    the lowered ``warm_inliers`` after a search (:data:`WARM_FLOOR_MARGIN`) with the solves
-    it has left. The previous labels themselves come from the body tracker.
+    steps and full solves of a method that takes ``step`` (:data:`FULL_AFTER_SEARCH`) and of
+    the rescans in its steps (:data:`RESCAN_EVERY_MAX`), and the lowered ``warm_inliers``
+    after a search (:data:`WARM_FLOOR_MARGIN`) with the solves it has left. The previous
+    labels themselves come from the body tracker.
     """
 
     def __init__(self) -> None:
