@@ -98,7 +98,7 @@ class WarmStarts:
         """Forget everything (the body ids restart)."""
         self.motions.clear()
         self.floor: Optional[Tuple[float, int]] = None
-        self.steps = 0                   # steps in a row; negative: full solves still due
+        self.full_due = 0                # full solves still due after a search
         self.noise = math.inf            # the last full solve's noise (px)
         self.full_next = False
         self.search_stamp = math.nan
@@ -130,7 +130,7 @@ class WarmStarts:
                 if stable in self.motions:
                     w[body], t[body] = self.motions[stable]
             out['init_motions'] = (w, t)
-            if method.accepts('step') and self.steps >= 0 and not self.full_next:
+            if method.accepts('step') and self.full_due == 0 and not self.full_next:
                 out['step'] = True
                 self._rescanned = None
                 if self.until_rescan <= 0:
@@ -149,7 +149,7 @@ class WarmStarts:
     def solved(self, method: Method, res: SegmentationResult, stamp: float = math.nan,
                interval: float = math.nan) -> None:
         """
-        Note a solve by ``method``: count steps, note the noise, lower the bar after a search.
+        Note a solve by ``method``: the full solves due, the noise, the rescans, the bar.
 
         ``res``: its result; its ``diagnostics.start`` tells a step (``'step'``), a tracked
         full solve (``'warm'``) and a search apart. ``stamp``: the window's newest frame (s),
@@ -158,18 +158,17 @@ class WarmStarts:
         start, noise = res.diagnostics.start, res.diagnostics.sigma_px
         if start == 'step':
             self.full_next = noise > NOISE_JUMP * self.noise
-            self.steps += 1
             self._rescan_done(res)
         elif method.accepts('step'):
             self._rescans_reset()
             self.noise, self.full_next = noise, False
             # after a search, full solves (every body rescanned) until FULL_AFTER_SEARCH
-            self.steps = min(self.steps + 1, 0) if start == 'warm' else -FULL_AFTER_SEARCH
+            self.full_due = max(self.full_due - 1, 0) if start == 'warm' else FULL_AFTER_SEARCH
             if start != 'warm':
                 self.search_stamp = stamp
-            elif self.steps < 0 and stamp - self.search_stamp >= (FULL_AFTER_SEARCH
-                                                                  - 0.5) * interval:
-                self.steps = 0          # the window moved FULL_AFTER_SEARCH frames on
+            elif (self.full_due > 0
+                  and stamp - self.search_stamp >= (FULL_AFTER_SEARCH - 0.5) * interval):
+                self.full_due = 0       # the window moved FULL_AFTER_SEARCH frames on
         if method.accepts('warm_inliers') and res.diagnostics.warm_rejected:
             share = res.diagnostics.inlier_share or 0.0
             self.floor = (max(share - WARM_FLOOR_MARGIN, 0.0), WARM_FLOOR_SOLVES)
