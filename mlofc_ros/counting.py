@@ -25,21 +25,24 @@ body more or one less scores better:
   of bodies whose angular velocities are closest within their covariances
   (:data:`MERGE_CHI2`), the later body's tracks given to the earlier (or unlabelled);
 - **one more** (a body starts moving): tried every :data:`BIRTH_EVERY` solves while enough
-  tracks are left unexplained (labelled -1) to make a body, those tracks as the new one; then,
-  every :data:`SEARCH_EVERY` to :data:`MAX_SEARCH_WAIT` solves or when more tracks come loose,
-  with those tracks unlabelled for the solver's search.
+  tracks are left unexplained to make a body (labelled -1, or above the score's outlier
+  bound: :func:`birth_candidate`), those tracks as the new one; then, every
+  :data:`SEARCH_EVERY` to :data:`MAX_SEARCH_WAIT` solves or when more tracks come loose, with
+  those tracks unlabelled for the solver's search.
 
 Both compare the BIC of :func:`~mlofc_ros.solver.model_selection.bic_score` at one noise level,
 the richer model's (so that the poorer cannot hide behind a larger noise), a change must
 win by :data:`SCORE_MARGIN`, and for :data:`HOLD` solves after a change the count does not go
 back (no flicker between two counts that score alike). A trial costs a warm solve, a search
-10-30 of them: on the scheduled stream of ``bench count`` the automatic count costs 0.8-1.4x
-the CPU of the count given.
+10-30 of them: on the scheduled stream of ``bench count`` the automatic count costs 1.1-1.4x
+the CPU of the count given with ``'robust'``, 0.7-2.8x with ``'general'`` (whose warm solve
+is a tracked solve, not a 20 ms step).
 """
 from typing import Callable, Optional, Sequence, Tuple
 
 from mlofc_ros.solver import SegmentationResult
-from mlofc_ros.solver.model_selection import bic_score, MAX_BODIES, min_body_lines, track_dof
+from mlofc_ros.solver.model_selection import (bic_score, MAX_BODIES, min_body_lines, track_dof,
+                                              unexplained)
 import numpy as np
 
 #: Solves between two tries of one more body while tracks stay unexplained.
@@ -117,11 +120,16 @@ def birth_candidate(res: SegmentationResult, dof: np.ndarray) -> Optional[np.nda
     """
     Return the labels of the count one more worth a try (the unexplained tracks as body n).
 
-    None when fewer usable tracks than :func:`min_body_lines` are unlabelled or the count is
-    at :data:`~mlofc_ros.solver.model_selection.MAX_BODIES`.
+    Unexplained: labelled -1, or above the outlier bound of the score at the result's noise
+    level (:func:`~mlofc_ros.solver.model_selection.unexplained`; ``'general'`` labels every
+    track at an inflated noise level, so that a box that starts moving keeps its lines on
+    the background: bench count's scheduled stream, 0-6 of 240 tracks labelled -1 with one
+    body for four, yet a BIC far better with four). None when fewer usable tracks than
+    :func:`min_body_lines` are unexplained or the count is at
+    :data:`~mlofc_ros.solver.model_selection.MAX_BODIES`.
     """
     labels = np.asarray(res.labels)
-    loose = (labels < 0) & (dof > 0)
+    loose = ((labels < 0) | unexplained(res, _noise(res), dof)) & (dof > 0)
     if res.n_bodies >= MAX_BODIES or int(loose.sum()) < min_body_lines(dof):
         return None
     return np.where(loose, res.n_bodies, labels)
@@ -189,8 +197,7 @@ class BodyCount:
         dof = track_dof(tracks)
         current = list(range(self.n))
         res = solve(self.n, np.asarray(previous), current)
-        sigma = res.diagnostics.sigma_px
-        sigma = float(sigma) if np.isfinite(sigma) and sigma > 0 else None
+        sigma = _noise(res)
         self._since_merge += 1
         self._since_change += 1
         settled = self._since_change >= HOLD
@@ -227,8 +234,7 @@ class BodyCount:
             if trial is None:
                 continue
             counts = np.bincount(trial.labels[trial.labels >= 0], minlength=trial.n_bodies)
-            richer = trial.diagnostics.sigma_px
-            richer = float(richer) if np.isfinite(richer) and richer > 0 else None
+            richer = _noise(trial)
             if (trial.n_bodies == self.n + 1 and np.all(counts >= min_body_lines(dof))
                     and bic_score(trial, richer, dof) < bic_score(res, richer, dof)
                     - SCORE_MARGIN):
@@ -243,6 +249,12 @@ class BodyCount:
             self._search_wait = min(2 * self._search_wait, MAX_SEARCH_WAIT)
             self._loose_at_failure = int(loose.sum())
         return res
+
+
+def _noise(res: SegmentationResult) -> Optional[float]:
+    """Return the noise level (px) a result measured, None when it has none."""
+    sigma = res.diagnostics.sigma_px
+    return float(sigma) if np.isfinite(sigma) and sigma > 0 else None
 
 
 def _trial(solve: Solve, n: int, labels: np.ndarray, bodies: Sequence[int]

@@ -15,7 +15,7 @@
 """Model selection's score on degenerate inputs: no numpy warning, a defined value."""
 import warnings
 
-from mlofc_ros.solver.model_selection import bic_score
+from mlofc_ros.solver.model_selection import bic_score, unexplained
 from mlofc_ros.solver.models import chi2_quantile
 from mlofc_ros.solver.result import SegmentationResult
 from mlofc_ros.solver.robust import OUTLIER_P
@@ -53,3 +53,16 @@ def test_no_usable_track_scores_inf():
         warnings.simplefilter('error')
         assert bic_score(_result(np.zeros((3, 1)), [0, 0, 0]), None, np.zeros(3)) == np.inf
         assert bic_score(_result(np.zeros((0, 2)), []), None, np.zeros(0)) == np.inf
+
+
+def test_unexplained_tracks_are_those_the_score_caps():
+    """Above the outlier bound at the noise given, whatever the label; unusable never."""
+    costs = np.full((6, 2), 0.5)
+    costs[1] = [40.0, 50.0]
+    costs[4] = [np.nan, np.nan]
+    dof = np.array([4.0, 4.0, 4.0, 0.0, 4.0, 4.0])
+    res = _result(costs, [0, 0, 1, 1, -1, 1])
+    assert np.array_equal(unexplained(res, 1.0, dof), [False, True, False, False, True, False])
+    assert chi2_quantile(OUTLIER_P, 4.0) < 40.0 < chi2_quantile(OUTLIER_P, 4.0) * 4.0
+    # at twice the noise the bound is four times higher: only the track without a cost
+    assert np.array_equal(unexplained(res, 2.0, dof), [False, False, False, False, True, False])

@@ -86,6 +86,10 @@ class Method:
     algebraic_fit : bool
         It needs the algebraic fit determined (enough tracks for the multibody polynomial)
         even at a known focal length; otherwise two tracks per body do.
+    motion_parameters : int
+        Parameters of one body's motion (3: a rotation; 6: a rotation and a translation with
+        its scale), which the count's score charges per body
+        (:func:`.model_selection.bic_score`).
 
     """
 
@@ -100,6 +104,7 @@ class Method:
     stand_in: Optional['Method'] = None
     fixed: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     algebraic_fit: bool = True
+    motion_parameters: int = 3
 
     def for_window(self, frames: int, window: int) -> 'Method':
         """Return the method that solves a window of ``frames`` frames (of at most ``window``)."""
@@ -168,7 +173,7 @@ GENERAL = Method('general', solve_general,
                  'Ours with a translation per body too (K >= 3, :mod:`.general`).',
                  slow=True, warm_start=WarmStart.MOTIONS, rescans=True,
                  keywords=frozenset({'init_labels', 'init_motions', 'rescan', 'step'}),
-                 min_frames=GENERAL_MIN_FRAMES, stand_in=ROTATION_STEP)
+                 min_frames=GENERAL_MIN_FRAMES, stand_in=ROTATION_STEP, motion_parameters=6)
 
 #: Every method by name, in the order of :data:`METHODS`.
 REGISTRY: Dict[str, Method] = {m.name: m for m in (ALGEBRAIC, KMEANS, ALGEBRAIC_KMEANS, ROBUST,

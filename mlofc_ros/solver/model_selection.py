@@ -17,15 +17,16 @@ Choosing the number of bodies (``n_bodies=0``): a BIC-style score on truncated c
 For ``n = 1 .. n_max`` the method is run; every track costs its chi-square under its best body,
 capped at the outlier bound, all at ONE noise level (the one estimated with the richest model,
 so that an under-fitted model cannot hide behind an inflated noise estimate). The score adds
-``3 log(rows)`` per body (three rotation parameters) and ``2 log n`` per track (its label), and
-the smallest score wins: a further body must explain more than it costs to describe.
+``log(rows)`` per parameter of a body's motion (three for a rotation, six with a translation)
+and ``2 log n`` per track (its label), and the smallest score wins: a further body must
+explain more than it costs to describe.
 """
 from dataclasses import replace
 from typing import Optional, Tuple
 
 import numpy as np
 
-from .methods import Method
+from .methods import Method, REGISTRY
 from .models import chi2_quantile
 from .problem import Problem
 from .result import SegmentationResult
@@ -49,23 +50,17 @@ def min_body_lines(dof: np.ndarray) -> int:
     return max(MIN_BODY_LINES, int(np.ceil(MIN_BODY_FRACTION * int(np.sum(dof > 0)))))
 
 
-def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) -> float:
+def _capped_costs(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray
+                  ) -> Tuple[np.ndarray, np.ndarray]:
     """
-    BIC of a segmentation: ``R log(RSS / R) + 3 n log R + 2 N log n``.
+    Return every usable track's cheapest cost and its outlier bound at noise ``sigma`` (px).
 
-    ``2 N log n`` is minus twice the log-likelihood of the labels under a uniform prior: with
-    two frames a line has only two equations, and the freedom to pick the best of n bodies
-    alone lowers the residual of pure noise by a factor of about n.
-
-    ``RSS`` sums every track's cost capped at the outlier bound (at noise ``sigma``, or the
-    model's own robust noise estimate when None); ``R`` rows, ``N`` usable tracks.
+    Both ``(N_usable,)``, px^2; a track no body has a cost for is ``inf``. ``sigma`` None: the
+    model's own robust noise estimate.
     """
-    n = res.n_bodies
     usable = dof > 0
-    if not usable.any():
-        return np.inf   # nothing to explain: no model is better than another
     # a track no body has a cost for (all NaN, e.g. degenerate for the general model) is not
-    # explained: +inf, capped at the outlier bound below like any unexplained track
+    # explained: +inf, capped at the outlier bound like any unexplained track
     costs = res.costs[usable]
     best = (np.where(np.isnan(costs), np.inf, costs).min(axis=1) if costs.shape[1]
             else np.full(len(costs), np.inf))
@@ -73,10 +68,48 @@ def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) 
         sigma = noise_sigma(res.costs, res.labels, dof)
         sigma = sigma if np.isfinite(sigma) else 1.0
         sigma = max(sigma, 1e-9)
-    cap = chi2_quantile(OUTLIER_P, dof[usable]) * sigma ** 2
+    return best, chi2_quantile(OUTLIER_P, dof[usable]) * sigma ** 2
+
+
+def unexplained(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray
+                ) -> np.ndarray:
+    """
+    Return the tracks ``(N,)`` bool that :func:`bic_score` counts at their outlier bound.
+
+    Usable tracks whose cheapest cost at noise ``sigma`` (px; None: the model's own estimate)
+    is above the bound, whatever their label: a model whose segmentation runs at an inflated
+    noise level (``'general'``) keeps such tracks labelled, yet they are what one more body
+    would explain.
+    """
+    out = np.zeros(len(dof), dtype=bool)
+    if np.any(dof > 0):
+        best, cap = _capped_costs(res, sigma, dof)
+        out[dof > 0] = best > cap
+    return out
+
+
+def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) -> float:
+    """
+    BIC of a segmentation: ``R log(RSS / R) + k n log R + 2 N log n``.
+
+    ``2 N log n`` is minus twice the log-likelihood of the labels under a uniform prior: with
+    two frames a line has only two equations, and the freedom to pick the best of n bodies
+    alone lowers the residual of pure noise by a factor of about n.
+
+    ``RSS`` sums every track's cost capped at the outlier bound (at noise ``sigma``, or the
+    model's own robust noise estimate when None); ``R`` rows, ``N`` usable tracks; ``k`` the
+    parameters of a body's motion (:attr:`.Method.motion_parameters` of ``res.method``: 3,
+    6 for ``'general'``, whose bodies also translate).
+    """
+    n = res.n_bodies
+    k = REGISTRY[res.method].motion_parameters if res.method in REGISTRY else 3
+    usable = dof > 0
+    if not usable.any():
+        return np.inf   # nothing to explain: no model is better than another
+    best, cap = _capped_costs(res, sigma, dof)
     rss = float(np.sum(np.minimum(best, cap)))
     rows = float(np.sum(dof))
-    return (rows * np.log(max(rss, 1e-300) / rows) + 3.0 * n * np.log(max(rows, 2.0))
+    return (rows * np.log(max(rss, 1e-300) / rows) + k * n * np.log(max(rows, 2.0))
             + 2.0 * usable.sum() * np.log(n))
 
 
