@@ -20,9 +20,9 @@ current count, as with a known count, and the count changes only when a trial so
 body more or one less scores better:
 
 - **one less** (a body stops and joins the still scene, two bodies move alike, a body leaves
-  the view and keeps only a few tracks): tried every :data:`MERGE_EVERY` solves for the body
-  with the fewest tracks when it has fewer than the smallest body allowed, else for the pair
-  of bodies whose angular velocities are closest within their covariances
+  the view and keeps only a few tracks): tried at once for the body with the fewest tracks
+  when it has fewer than the smallest body allowed, else every :data:`MERGE_EVERY` solves for
+  the pair of bodies whose angular velocities are closest within their covariances
   (:data:`MERGE_CHI2`), the later body's tracks given to the earlier (or unlabelled);
 - **one more** (a body starts moving): tried every :data:`BIRTH_EVERY` solves while enough
   tracks are left unexplained to make a body (labelled -1, or above the score's outlier
@@ -34,8 +34,8 @@ Both compare the BIC of :func:`~mlofc_ros.solver.model_selection.bic_score` at o
 the richer model's (so that the poorer cannot hide behind a larger noise), a change must
 win by :data:`SCORE_MARGIN`, and for :data:`HOLD` solves after a change the count does not go
 back (no flicker between two counts that score alike). A trial costs a warm solve, a search
-10-30 of them: on the scheduled stream of ``bench count`` the automatic count costs 1.1-1.4x
-the CPU of the count given with ``'robust'``, 0.7-2.8x with ``'general'`` (whose warm solve
+10-30 of them: on the scheduled stream of ``bench count`` the automatic count costs 0.9-1.4x
+the CPU of the count given with ``'robust'``, 0.8-2.9x with ``'general'`` (whose warm solve
 is a tracked solve, not a 20 ms step).
 """
 from typing import Callable, Optional, Sequence, Tuple
@@ -52,7 +52,8 @@ BIRTH_EVERY = 5
 #: solves.
 SEARCH_EVERY = 10
 MAX_SEARCH_WAIT = 40
-#: Solves between two tries of one body less while a pair of bodies moves alike.
+#: Solves between two tries of one body less while a pair of bodies moves alike (a body below
+#: the smallest size is tried at every solve).
 MERGE_EVERY = 2
 #: Two bodies whose angular velocities differ by less than this squared Mahalanobis distance
 #: (their two covariances summed) are tried as one. Not a chi-square bound (16.3 at 99.9%):
@@ -201,8 +202,12 @@ class BodyCount:
         self._since_merge += 1
         self._since_change += 1
         settled = self._since_change >= HOLD
-        merged = (merge_candidate(res, dof) if self._since_merge >= self.merge_every
-                  and (settled or self._last != 'birth') else None)
+        merged = merge_candidate(res, dof) if settled or self._last != 'birth' else None
+        # a body below the smallest size is tried at once (a body whose object left the view
+        # keeps a few tracks for a solve or two, then takes others': bench count's general
+        # stream kept it for good), a pair moving alike every merge_every-th solve
+        if merged is not None and (merged[2] >= 0 and self._since_merge < self.merge_every):
+            merged = None
         if merged is not None:
             self._since_merge = 0
             labels, gone, keep = merged

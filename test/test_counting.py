@@ -100,6 +100,24 @@ def test_a_change_of_count_needs_a_better_score():
     assert count.last_change == 'search' and calls[-1] == 0
 
 
+def test_a_body_below_the_smallest_size_is_tried_at_once():
+    """Its object left the view: one less is tried at the next solve, not every 2nd one."""
+    calls: List[int] = []
+    w = [[0, 0, 0], [0.01, 0, 0], [0, 0.01, 0]]
+    labels = np.repeat([0, 1, 2], [50, 47, 3])
+
+    def solve(n, start, bodies):
+        calls.append(n)
+        if n == 0:
+            return _result(labels, w)
+        return _result(np.where(start >= n, -1, start), w[:n])
+    count = BodyCount(merge_every=100)
+    tracks = np.zeros((100, 5, 4))
+    count.solve(tracks, None, solve)
+    count.solve(tracks, labels, solve)
+    assert calls[1:] == [3, 2] and count.n == 2 and count.last_change == 'merge'
+
+
 def test_a_trial_that_cannot_be_solved_is_lost_not_the_frame():
     def solve(n, labels, bodies):
         if n == 0:
