@@ -206,7 +206,7 @@ class BodyCount:
         # a body below the smallest size is tried at once (a body whose object left the view
         # keeps a few tracks for a solve or two, then takes others': bench count's general
         # stream kept it for good), a pair moving alike every merge_every-th solve
-        if merged is not None and (merged[2] >= 0 and self._since_merge < self.merge_every):
+        if merged is not None and merged[2] >= 0 and self._since_merge < self.merge_every:
             merged = None
         if merged is not None:
             self._since_merge = 0

@@ -13,6 +13,7 @@
 # limitations under the License.
 
 """Model selection's score on degenerate inputs: no numpy warning, a defined value."""
+from dataclasses import replace
 import warnings
 
 from mlofc_ros.solver.model_selection import bic_score, unexplained
@@ -66,3 +67,14 @@ def test_unexplained_tracks_are_those_the_score_caps():
     assert chi2_quantile(OUTLIER_P, 4.0) < 40.0 < chi2_quantile(OUTLIER_P, 4.0) * 4.0
     # at twice the noise the bound is four times higher: only the track without a cost
     assert np.array_equal(unexplained(res, 2.0, dof), [False, False, False, False, True, False])
+
+
+def test_a_body_that_translates_costs_six_parameters():
+    """'general' bodies are charged a rotation and a translation: 3 more log(rows) each."""
+    rng = np.random.default_rng(1)
+    costs = rng.uniform(0.1, 2.0, (30, 2))
+    labels = np.argmin(costs, axis=1)
+    dof = np.full(30, 8.0)
+    rotation = replace(_result(costs, labels), method='robust')
+    assert np.isclose(bic_score(_result(costs, labels), 1.0, dof) - bic_score(rotation, 1.0, dof),
+                      3 * 2 * np.log(dof.sum()))
