@@ -71,16 +71,16 @@ SCORE_MARGIN = 10.0
 Solve = Callable[[int, Optional[np.ndarray], Optional[Sequence[int]]], SegmentationResult]
 
 
-def merge_candidate(res: SegmentationResult, dof: np.ndarray
+def merge_candidate(res: SegmentationResult, dof: np.ndarray, pairs: bool = True
                     ) -> Optional[Tuple[np.ndarray, int, int]]:
     """
     Return the labels of the count one less worth a try, the body gone and the one kept.
 
     The body with the fewest tracks when it holds fewer than :func:`min_body_lines` (its
-    tracks unlabelled, none kept: -1), else the pair of bodies closest in angular velocity
-    within :data:`MERGE_CHI2`, the later body's tracks given to the earlier (bodies in the
-    order of their stable ids: the older id is kept, so a body that stops takes the still
-    background's). Labels in ``0..n-2``; None when no body is worth a try.
+    tracks unlabelled, none kept: -1), else (with ``pairs``) the pair of bodies closest in
+    angular velocity within :data:`MERGE_CHI2`, the later body's tracks given to the earlier
+    (bodies in the order of their stable ids: the older id is kept, so a body that stops
+    takes the still background's). Labels in ``0..n-2``; None when no body is worth a try.
     """
     labels = np.asarray(res.labels)
     n = res.n_bodies
@@ -90,6 +90,8 @@ def merge_candidate(res: SegmentationResult, dof: np.ndarray
     small = int(np.argmin(counts))
     if counts[small] < min_body_lines(dof):
         return _without(labels, small, -1), small, -1
+    if not pairs:
+        return None
     w = np.asarray(res.segmentation_angular_velocities, dtype=float).reshape(-1, 3)
     cov = np.asarray(res.angular_covariances, dtype=float).reshape(-1, 3, 3)
     best, pair = MERGE_CHI2, None
@@ -202,12 +204,11 @@ class BodyCount:
         self._since_merge += 1
         self._since_change += 1
         settled = self._since_change >= HOLD
-        merged = merge_candidate(res, dof) if settled or self._last != 'birth' else None
         # a body below the smallest size is tried at once (a body whose object left the view
         # keeps a few tracks for a solve or two, then takes others': bench count's general
         # stream kept it for good), a pair moving alike every merge_every-th solve
-        if merged is not None and merged[2] >= 0 and self._since_merge < self.merge_every:
-            merged = None
+        merged = (merge_candidate(res, dof, pairs=self._since_merge >= self.merge_every)
+                  if settled or self._last != 'birth' else None)
         if merged is not None:
             self._since_merge = 0
             labels, gone, keep = merged

@@ -51,6 +51,7 @@ def test_trials_one_less_and_one_more():
     # two bodies moving alike (within MERGE_CHI2): the later one joins the earlier
     alike = _result(labels, [[0.01, 0, 0], [0, 0, 0], [0, 0, 5e-4]])
     got, gone, keep = merge_candidate(alike, dof)
+    assert merge_candidate(alike, dof, pairs=False) is None      # small bodies only
     assert (gone, keep) == (2, 1) and np.array_equal(got, np.repeat([0, 1], [50, 50]))
     assert 5e-4 ** 2 / (2 * 1e-4 ** 2) < MERGE_CHI2
     # distinct motions: no trial
