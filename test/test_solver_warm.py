@@ -89,27 +89,31 @@ def test_warm_inliers_sets_the_share_a_warm_start_keeps_without_a_search():
                           warm_inliers=bad)
 
 
+def _general_solve(warm, labels, n, start, w, sigma=0.5, stamp=float('nan')):
+    """Run ``warm``'s schedule through one solve of 'general' (motions ``w (n, 3)``)."""
+    from mlofc_ros.solver.methods import GENERAL
+    from mlofc_ros.solver.result import Diagnostics, SegmentationResult
+    kw = warm.keywords(GENERAL, labels, n)
+    res = SegmentationResult(
+        labels=labels, angular_velocities=w, angular_covariances=np.stack([np.eye(3)] * n),
+        focal_length=500.0, residuals=np.zeros(len(labels)), costs=np.zeros((len(labels), n)),
+        method='general', segmentation_angular_velocities=np.array(w, dtype=float),
+        translation_directions=np.tile([0.0, 0.0, 1.0], (n, 1)),
+        diagnostics=Diagnostics(start=start, sigma_px=sigma,
+                                translation_scales=np.full(n, 0.02)))
+    warm.solved(GENERAL, res, stamp, 0.1)
+    warm.remember(res, np.arange(n), np.ones(n, dtype=bool))
+    return kw
+
+
 def test_a_stream_of_general_solves_steps_between_full_solves():
     # the pipeline's schedule: full solves (every body rescanned) after a search, then steps,
     # one body rescanned in turn every RESCAN_EVERY steps, a full solve after a noise jump
-    from mlofc_ros.solver.methods import GENERAL
-    from mlofc_ros.solver.result import Diagnostics, SegmentationResult
     from mlofc_ros.solver.warm import FULL_AFTER_SEARCH, NOISE_JUMP, RESCAN_EVERY, WarmStarts
     warm, labels, n = WarmStarts(), np.zeros(6, dtype=np.int64), 2
 
     def solve(start, sigma=0.5, stamp=float('nan'), w=0.01):
-        kw = warm.keywords(GENERAL, labels, n)
-        res = SegmentationResult(
-            labels=labels, angular_velocities=np.full((n, 3), 0.01),
-            angular_covariances=np.stack([np.eye(3)] * n), focal_length=500.0,
-            residuals=np.zeros(6), costs=np.zeros((6, n)), method='general',
-            segmentation_angular_velocities=np.full((n, 3), w),
-            translation_directions=np.tile([0.0, 0.0, 1.0], (n, 1)),
-            diagnostics=Diagnostics(start=start, sigma_px=sigma,
-                                    translation_scales=np.full(n, 0.02)))
-        warm.solved(GENERAL, res, stamp, 0.1)
-        warm.remember(res, np.arange(n), np.ones(n, dtype=bool))
-        return kw
+        return _general_solve(warm, labels, n, start, np.full((n, 3), w), sigma, stamp)
 
     assert 'init_motions' not in solve('spatial')          # the first window: a search
     for _ in range(FULL_AFTER_SEARCH):
@@ -142,23 +146,12 @@ def test_rescans_back_off_while_they_change_no_basin():
     # one body rescanned in turn every RESCAN_EVERY steps; after each round of n rescans that
     # moved no body to another basin the steps between them double, up to RESCAN_EVERY_MAX;
     # a rescan that does, or any solve that is not a step, brings them back
-    from mlofc_ros.solver.methods import GENERAL
-    from mlofc_ros.solver.result import Diagnostics, SegmentationResult
     from mlofc_ros.solver.warm import RESCAN_EVERY, RESCAN_EVERY_MAX, RESCAN_SWITCH, WarmStarts
     warm, labels, n = WarmStarts(), np.zeros(6, dtype=np.int64), 2
     w = np.full((n, 3), 0.02)
 
     def solve(start):
-        kw = warm.keywords(GENERAL, labels, n)
-        res = SegmentationResult(
-            labels=labels, angular_velocities=w, angular_covariances=np.stack([np.eye(3)] * n),
-            focal_length=500.0, residuals=np.zeros(6), costs=np.zeros((6, n)),
-            method='general', segmentation_angular_velocities=w.copy(),
-            translation_directions=np.tile([0.0, 0.0, 1.0], (n, 1)),
-            diagnostics=Diagnostics(start=start, sigma_px=0.5,
-                                    translation_scales=np.full(n, 0.02)))
-        warm.solved(GENERAL, res)
-        warm.remember(res, np.arange(n), np.ones(n, dtype=bool))
+        kw = _general_solve(warm, labels, n, start, w.copy())
         return kw.get('rescan', []) if kw.get('step') else None
 
     def steps_between(count):
