@@ -551,14 +551,34 @@ def test_a_tracking_step_advances_the_bodies_without_a_search(monkeypatch):
         assert np.all(np.isfinite(res.angular_covariances[b]))
 
 
+def test_a_tracking_step_fits_a_body_without_a_motion_from_its_tracks():
+    # the automatic count's trial of one more body: its tracks labelled, no motion yet
+    tracks, truth, W, (w0, t0) = _two_spinning_bodies()
+    unknown = w0.copy()
+    unknown[1] = np.nan
+    res = segment_lines(tracks[:, 1:], 2, intrinsics=(F, F, C, C), method='general',
+                        init_labels=truth, init_motions=(unknown, t0), step=True)
+    assert res.diagnostics.start == 'step'
+    assert np.count_nonzero(res.labels != truth) <= 1
+    err = np.linalg.norm(res.angular_velocities[1] - W[1]) / np.linalg.norm(W[1])
+    assert err < 0.05
+
+
 def test_a_tracking_step_falls_back_to_the_tracked_solve_where_it_cannot_step():
+    from mlofc_ros.solver.general_method import NEW_BODY_LINES
     tracks, truth, W, (w0, t0) = _two_spinning_bodies()
     intr = (F, F, C, C)
     unknown = w0.copy()
     unknown[1] = np.nan                                  # a body without a motion
+    few = truth.copy()                                   # ... and too few tracks to fit it
+    few[np.flatnonzero(truth == 1)[NEW_BODY_LINES - 1:]] = -1
     res = segment_lines(tracks[:, 1:], 2, intrinsics=intr, method='general',
-                        init_labels=truth, init_motions=(unknown, t0), step=True)
+                        init_labels=few, init_motions=(unknown, t0), step=True)
     assert res.diagnostics.start == 'warm'
+    res = segment_lines(tracks[:, 1:], 2, intrinsics=intr, method='general',
+                        init_labels=truth, init_motions=(np.full_like(w0, np.nan), t0),
+                        step=True)
+    assert res.diagnostics.start not in ('step', 'warm')   # no body has a motion: a search
     with pytest.raises(ValueError, match='step needs init_motions'):
         segment_lines(tracks, 2, intrinsics=intr, method='general', init_labels=truth,
                       step=True)
