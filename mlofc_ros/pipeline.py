@@ -28,6 +28,7 @@ Example::
         r.labels, r.angular_velocities      # (M,), (2, 3) rad/s
 """
 from collections import deque
+import dataclasses
 import math
 import statistics
 import time
@@ -41,7 +42,8 @@ from mlofc_ros.counting import BodyCount, compact_labels
 from mlofc_ros.frame import (centred_intrinsics, check_image_size, check_lines, FrameResult,
                              invalid_bodies, lookup, Observation, ray_intrinsics, segment_rays,
                              TIMING_KEYS, unsolved_fields)
-from mlofc_ros.solver import get_method, segment_lines, SegmentationResult
+from mlofc_ros.lane import Finished, SolveJob
+from mlofc_ros.solver import get_method, Method, segment_lines, SegmentationResult, StepNotTaken
 from mlofc_ros.solver.focal import focal_evidence, FOCAL_PRIOR_LOG_SIGMA, FocalEstimate
 from mlofc_ros.solver.warm import WarmStarts
 from mlofc_ros.tracks.config import TrackerConfig
@@ -141,6 +143,14 @@ class Pipeline:
         # thread, read by the observing one
         self._epoch = 0
         self._running: Optional[RunningFit] = None
+        # the solver lane (use_lane) that runs the full solves of a stepping method while the
+        # frames step, and the solve state's generation its jobs started from (a reset or a
+        # reconfiguration drops a job in flight); a frame neither stepped nor solved is
+        # answered from the running fit
+        self._lane: Any = None
+        self._generation = 0
+        self._from_running_fit = False
+        self._relabel_next = False
 
     # --- configuration -------------------------------------------------------------------
 
@@ -160,6 +170,8 @@ class Pipeline:
         new = _params.check_all(kwargs)
         changed = {k for k, v in new.items() if self.params[k] != v}
         self.params.update(new)
+        if changed:
+            self._generation += 1           # a lane's job started from the old settings
         if 'min_segment_length' in changed:
             self._tracker = make_tracker(self.params)
             self._restart_window()
@@ -195,6 +207,7 @@ class Pipeline:
 
     def _reset_bodies(self) -> None:
         """Restart body numbering: stable ids, warm starts, the automatic count."""
+        self._generation += 1
         self.bodies.reset()
         self._warm.reset()
         self._count.reset()
@@ -538,6 +551,11 @@ class Pipeline:
         t = time.perf_counter()
         res = self._segment(obs, problems)
         timings['solve'] = (time.perf_counter() - t) * 1e3
+        if res is None and self._from_running_fit:
+            self._from_running_fit = False
+            return dataclasses.replace(self.carry(obs), problem='; '.join(problems) or None,
+                                       timings=dict(timings, total=obs.elapsed_ms
+                                                    + (time.perf_counter() - t0) * 1e3))
         out = (unsolved_fields(obs, self.n_bodies) if res is None
                else self._publish(obs, res, problems))
         rays = segment_rays(obs.segments if obs.undistorted is None else obs.undistorted,
@@ -614,10 +632,35 @@ class Pipeline:
         self._running = None
         self._focal_now = None
 
+    @property
+    def lane(self) -> Any:
+        """Return the solver lane of :meth:`use_lane` (None: every solve here, in turn)."""
+        return self._lane
+
+    def use_lane(self, lane: Any) -> None:
+        """
+        Run the full solves of a stepping method in ``lane`` (see :mod:`mlofc_ros.lane`).
+
+        With a known count and a method that steps (``general``), a frame whose schedule asks
+        for a search or a full solve hands it to the lane (when idle) and is stepped from
+        the running fit meanwhile, or answered from it (:meth:`carry`) when the step does not
+        hold and until the first search is back; the lane's answer becomes the running fit
+        at the next :meth:`solve`, and the first step from it labels every track afresh at
+        its motions (its labels are of a window the stream has since left). ``lane``: an
+        :class:`~mlofc_ros.lane.InlineLane`, a
+        :class:`~mlofc_ros.solve_process.ProcessLane`, or None to solve every frame here
+        (the default). A job in flight is dropped.
+        """
+        if self._lane is not None and self._lane is not lane:
+            self._lane.close()
+        self._lane = lane
+        self._generation += 1
+
     def _apply_resets(self, resets: FrozenSet[str]) -> None:
         """Reset the solve side as an observation asks (see :attr:`Observation.resets`)."""
         if 'tracks' in resets:
             self.bodies.forget_tracks()     # the tracker restarted and may reuse track ids
+            self._generation += 1
         if 'bodies' in resets:
             self._reset_bodies()
         if 'focal' in resets:
@@ -654,8 +697,13 @@ class Pipeline:
                    else [int(self._counted_ids[b]) if b >= 0 else -1 for b in bodies])
             return solve(n, labels, ids)
 
+        lane = (self._lane if n_req > 0 and method.accepts('step_only') else None)
         try:
-            if n_req > 0:
+            if lane is not None:
+                res = self._step_beside_lane(obs, method, n_req, lane, problems)
+                if res is None:
+                    return None
+            elif n_req > 0:
                 res = solve(n_req, self.bodies.previous_labels(obs.win_ids))
             else:
                 previous = None
@@ -671,6 +719,60 @@ class Pipeline:
             return None
         self._warm.solved(method, res, obs.stamp, obs.frame_interval)
         return res
+
+    def _step_beside_lane(self, obs: Observation, method: Method, n: int, lane: Any,
+                          problems: List[str]) -> Optional[SegmentationResult]:
+        """
+        Step the window of ``obs``; hand a search or full solve that is due to ``lane``.
+
+        Returns the result (None: answer from the running fit). The lane's finished job, if
+        any, first becomes the running fit.
+        """
+        finished = lane.poll()
+        if finished is not None:
+            self._adopt(finished, problems)
+        keywords = self._warm.keywords(method, self.bodies.previous_labels(obs.win_ids), n)
+        common = {'intrinsics': obs.intrinsics, 'image_size': obs.image_size,
+                  'seed': int(self.params['seed'])}
+        if not keywords.get('step'):
+            # a search or a full solve is due: the lane's, from the running fit as it is now
+            if not lane.busy:
+                lane.submit(SolveJob(dataclasses.replace(obs, gray=None),
+                                     dict(common, tracks=obs.win_tracks, n_bodies=n,
+                                          method=method.name, **keywords),
+                                     self._generation))
+            if 'init_motions' not in keywords:
+                # nothing to step from before the first search
+                self._from_running_fit = True
+                return None
+            keywords = {k: v for k, v in keywords.items() if k != 'rescan'}
+            keywords['step'] = True
+        if self._relabel_next:
+            # the first step from a lane's answer: its labels are of a window the stream has
+            # since moved on from (by the solve's duration), the motions still hold; every
+            # track is assigned at them afresh instead of most failing the step's guard
+            keywords['init_labels'] = np.full_like(keywords['init_labels'], -1)
+            self._relabel_next = False
+        try:
+            return segment_lines(obs.win_tracks, n, method=method.name, step_only=True,
+                                 **common, **keywords)
+        except StepNotTaken:
+            self._warm.full_next = True           # the lane's full solve next
+            self._from_running_fit = True
+            return None
+
+    def _adopt(self, finished: Finished, problems: List[str]) -> None:
+        """Make a lane's answer the running fit (state only: its frame was answered)."""
+        job, result = finished
+        if job.generation != self._generation:
+            return                                # started before a reset: stale
+        if isinstance(result, Exception):
+            problems.append(f'full solve: {type(result).__name__}: {result}')
+            return
+        self._warm.solved(get_method(job.keywords['method']), result, job.obs.stamp,
+                          job.obs.frame_interval)
+        self._publish(job.obs, result, [])
+        self._relabel_next = True
 
     def _publish(self, obs: Observation, res: SegmentationResult, problems: List[str]
                  ) -> Dict[str, Any]:

@@ -25,7 +25,10 @@ its image) to a pipeline in the child that only solves, waits for its
 to the parent. The solve side's state (body ids, warm starts, count, focal estimate) lives in
 the child. The child is ``python -m mlofc_ros.solve_process`` (the parent's interpreter and
 environment) in a process group of its own, talking over a socket pair: it ends when told to, or
-when the parent's end closes (the parent ended, however).
+when the parent's end closes (the parent ended, however). Its full solves (a search: 1-2 s) run
+in one more child of its own, a solver lane (:class:`ProcessLane`, :mod:`mlofc_ros.lane`),
+while it steps the frames from the running fit (20-100 ms each): a live node at 30 Hz solved
+15-57% of the frames when the full solves ran in turn, 77-86% with the lane (bench live).
 
 Example::
 
@@ -44,6 +47,7 @@ from typing import Any, Mapping, Optional, Tuple, TYPE_CHECKING
 
 if TYPE_CHECKING:                      # the child imports the pipeline after its signals
     from mlofc_ros.frame import FrameResult, Observation
+    from mlofc_ros.lane import Finished, SolveJob
     from mlofc_ros.pipeline import Pipeline
 
 #: Seconds to wait for the child to end on :meth:`SolveProcess.close` before killing it.
@@ -60,11 +64,20 @@ class SolverProcessEnded(SolverProcessError):
 
 def _serve(conn: Connection) -> None:
     """Child: solve the observations received on ``conn`` until told to stop or it closes."""
+    from mlofc_ros.lane import run_job
     from mlofc_ros.pipeline import Pipeline
+    from mlofc_ros.solver import get_method
     try:
-        pipeline = Pipeline(**conn.recv())
+        params, lane = conn.recv()
     except (EOFError, OSError):
         return
+    pipeline = Pipeline(**params)
+    if lane:
+        # the full solves of a stepping method in a lane of their own: the frames step
+        # meanwhile (its child started now for such a method, else at its first job)
+        pipeline.use_lane(ProcessLane())
+        if get_method(pipeline.params['method']).accepts('step_only'):
+            pipeline.lane.start()
     while True:
         try:
             request, payload = conn.recv()
@@ -75,49 +88,71 @@ def _serve(conn: Connection) -> None:
         try:
             if request == 'solve':
                 reply: Any = (pipeline.solve(payload), pipeline.solve_state())
+            elif request == 'job':
+                reply = run_job(payload)        # a lane's: its exception is its answer
             elif request == 'reconfigure':
                 pipeline.reconfigure(**payload)
                 reply = None
             else:
                 raise ValueError(f'unknown request {request!r}')
         except Exception as exc:  # noqa: B902 (reported to the parent, the child lives on)
-            conn.send(('error', f'{type(exc).__name__}: {exc}'))
-            continue
-        conn.send(('ok', reply))
+            status, reply = 'error', f'{type(exc).__name__}: {exc}'
+        else:
+            status = 'ok'
+        try:
+            conn.send((status, reply))
+        except OSError:
+            return                                      # the parent went while we solved
+
+
+def _spawn(params: Mapping[str, Any], lane: bool, group: bool = True
+           ) -> Tuple[subprocess.Popen, Connection]:
+    """
+    Start a child that serves a pipeline made with ``params``; its process and our end.
+
+    ``lane``: the child's pipeline runs its full solves in a :class:`ProcessLane`; ``group``:
+    the child in a process group of its own.
+    """
+    # a fresh interpreter (not a fork: the parent runs threads, DDS's and the node's, whose
+    # locks a fork would copy held) in a process group of its own: a terminal's Ctrl-C
+    # reaches the node's group, and the node decides when its solver stops (a Unix session of
+    # its own would also schedule it apart from the node's: about 10% fewer frames
+    # solved in bench live, within its runs' spread). Over a socket pair the child sees
+    # the parent end as its input's end.
+    ours, theirs = socket.socketpair()
+    with theirs:
+        process = subprocess.Popen(
+            [sys.executable, '-m', 'mlofc_ros.solve_process', str(theirs.fileno())],
+            pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
+            process_group=0 if group else None)
+    conn = Connection(ours.detach())
+    conn.send((dict(params), lane))
+    return process, conn
 
 
 class SolveProcess:
     """
     A child process that solves a pipeline's observations (see the module docstring).
 
-    ``params``: the pipeline's parameters (``Pipeline.params``). The child is started at
-    once (it imports numpy and OpenCV: about a second); the first :meth:`solve` waits for it. Use
+    ``params``: the pipeline's parameters (``Pipeline.params``). ``lane``: the child runs the
+    full solves of a stepping method (``general``) in a lane of its own
+    (:class:`ProcessLane`, :meth:`Pipeline.use_lane`) and steps the frames meanwhile; without
+    it every solve the schedule asks for runs in turn. The child is started at once (it
+    imports numpy and OpenCV: about a second); the first :meth:`solve` waits for it. Use
     from one thread at a time; :meth:`close` (or the ``with`` block) ends the child, which
     also ends when the parent does.
     """
 
-    def __init__(self, params: Mapping[str, Any]) -> None:
+    def __init__(self, params: Mapping[str, Any], lane: bool = True) -> None:
         self._params = dict(params)
+        self._lane = bool(lane)
         self._closed = False
         self._conn: Any = None
         self._process: Optional[subprocess.Popen] = None
         self._start()
 
     def _start(self) -> None:
-        # a fresh interpreter (not a fork: the parent runs threads, DDS's and the node's, whose
-        # locks a fork would copy held) in a process group of its own: a terminal's Ctrl-C
-        # reaches the node's group, and the node decides when its solver stops (a Unix session of
-        # its own would also schedule it apart from the node's: about 10% fewer frames
-        # solved in bench live, within its runs' spread). Over a socket pair the child sees
-        # the parent end as its input's end.
-        ours, theirs = socket.socketpair()
-        with theirs:
-            self._process = subprocess.Popen(
-                [sys.executable, '-m', 'mlofc_ros.solve_process', str(theirs.fileno())],
-                pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
-                process_group=0)
-        self._conn = Connection(ours.detach())
-        self._conn.send(self._params)
+        self._process, self._conn = _spawn(self._params, self._lane)
 
     def _call(self, request: str, payload: Any) -> Any:
         if self._process is None and not self._closed:     # a restart failed: try again
@@ -201,6 +236,68 @@ class SolveProcess:
 
     def __exit__(self, *exc: Tuple[Any, ...]) -> None:
         self.close()
+
+
+class ProcessLane:
+    """
+    A solver lane (:mod:`mlofc_ros.lane`) in a child process: full solves beside the steps.
+
+    The child (the same program as :class:`SolveProcess`'s, in the caller's process group:
+    it ends with it) starts at :meth:`start` or the first :meth:`submit`. A child that ended
+    is started again at the next :meth:`submit`; the job it held comes back from
+    :meth:`poll` with a :class:`SolverProcessEnded`.
+    """
+
+    def __init__(self) -> None:
+        self._process: Optional[subprocess.Popen] = None
+        self._conn: Any = None
+        self._job: Any = None
+
+    @property
+    def busy(self) -> bool:
+        """Whether a job is running."""
+        return self._job is not None
+
+    def start(self) -> None:
+        """Start the child now (it imports numpy and OpenCV: about a second) if not running."""
+        if self._process is None:
+            self._process, self._conn = _spawn({}, lane=False, group=False)
+
+    def submit(self, job: 'SolveJob') -> None:
+        """Send ``job`` to the child (started if need be); returns at once."""
+        if self.busy:
+            raise RuntimeError('the lane is busy')
+        self.start()
+        self._conn.send(('job', job.keywords))
+        self._job = job
+
+    def poll(self) -> Optional['Finished']:
+        """Return the finished job and its result (or exception) once, else None; no wait."""
+        if self._job is None:
+            return None
+        try:
+            if not self._conn.poll():
+                return None
+            status, reply = self._conn.recv()
+        except (EOFError, OSError):
+            code = self._process.poll()
+            self.close()
+            status, reply = 'ended', SolverProcessEnded(
+                f'the solver lane process ended (exit code {code}); restarted at the next job')
+        job, self._job = self._job, None
+        if status == 'error':
+            reply = SolverProcessError(f'in the solver lane process: {reply}')
+        return job, reply
+
+    def close(self) -> None:
+        """End the child (at once: a job it holds is dropped)."""
+        process, self._process, self._job = self._process, None, None
+        if process is None:
+            return
+        if process.poll() is None:
+            process.kill()
+            process.wait(CLOSE_TIMEOUT)
+        self._conn.close()
 
 
 if __name__ == '__main__':

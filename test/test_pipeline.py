@@ -23,7 +23,7 @@ from mlofc_ros.bodies import assign, BodyTracker, relabel
 from mlofc_ros.pipeline import (focal_covariance, FOCAL_SAMPLES, FrameResult, Pipeline,
                                 TIMING_KEYS)
 from mlofc_ros.segments.detect import has_ximgproc
-from mlofc_ros.solver import segment_lines
+from mlofc_ros.solver import get_method, segment_lines
 from mlofc_ros.solver.focal import FOCAL_PRIOR_LOG_SIGMA
 from mlofc_ros.solver.warm import WARM_FLOOR_MARGIN, WARM_FLOOR_SOLVES
 from mlofc_ros.tracks.undistort import undistort_segments
@@ -877,3 +877,66 @@ def test_a_general_stream_steps_after_its_first_full_solves(monkeypatch):
         pairs = {(int(g), int(s)) for g, s in zip(truth, r.labels) if s >= 0}
         assert len(pairs) == 2 and len({s for _, s in pairs}) == 2
         assert np.mean(r.labels >= 0) >= 0.9
+
+
+def test_a_lane_runs_the_full_solves_while_the_frames_step():
+    # the node's solver process: a search and the full solves after it go to the lane; the
+    # frames meanwhile step from the running fit, or are answered from it
+    from mlofc_ros.lane import InlineLane
+    from scenes import random_scene
+    tracks, truth, omegas, intr = random_scene(2, 25, n_frames=30, noise=0.2, seed=3,
+                                               own_centre=True)
+    ids = np.arange(tracks.shape[0])
+    p = Pipeline(num_bodies=2, window=10, method='general')
+    lane = InlineLane(delay=4)                  # each full solve answers 4 frames later
+    p.use_lane(lane)
+    jobs = []
+    real_submit = lane.submit
+    lane.submit = lambda job: jobs.append(job) or real_submit(job)
+    results = [p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+               for k in range(tracks.shape[1])]
+    first = get_method('general').min_frames - 1          # the first general window
+    assert jobs and round(jobs[0].obs.stamp * 30.0) == first
+    assert 'init_motions' not in jobs[0].keywords           # a search
+    assert all('init_motions' in job.keywords for job in jobs[1:])   # full solves
+    # until the search is back the frames are answered from the running fit; then they step
+    waiting = results[first:first + 5]
+    assert all(not r.body_valid.any() for r in waiting)
+    stepped = [r for r in results[first + 5:] if r.body_valid.all()]
+    assert len(stepped) >= 18
+    for r in results[-3:]:
+        assert np.mean(r.labels >= 0) >= 0.9
+        for s in range(2):
+            g = int(np.bincount(truth[r.labels == s]).argmax())
+            assert np.count_nonzero((r.labels == s) & (truth != g)) <= 2
+            w = r.angular_velocities[s] / 30.0                  # rad/s to rad per frame
+            assert np.linalg.norm(w - omegas[g]) < 0.05 * np.linalg.norm(omegas[g])
+
+
+@pytest.mark.parametrize('change', ['reconfigure', 'reset'])
+def test_a_lane_answer_started_before_a_reconfiguration_is_dropped(change, monkeypatch):
+    import mlofc_ros.pipeline as pipeline_module
+    from mlofc_ros.lane import InlineLane
+    from scenes import random_scene
+    tracks, _, _, intr = random_scene(2, 25, n_frames=20, noise=0.2, seed=3, own_centre=True)
+    ids = np.arange(tracks.shape[0])
+    p = Pipeline(num_bodies=2, window=10, method='general')
+    lane = InlineLane(delay=3)
+    p.use_lane(lane)
+    for k in range(6):                                   # the search submitted at frame 4
+        p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+    assert lane.busy
+    adopted = []
+    real = pipeline_module.Pipeline._adopt
+    monkeypatch.setattr(pipeline_module.Pipeline, '_adopt',
+                        lambda self, finished, problems: adopted.append(
+                            finished[0].generation == self._generation)
+                        or real(self, finished, problems))
+    if change == 'reconfigure':
+        p.reconfigure(seed=7)
+    else:
+        p.reset()
+    for k in range(6, 20):
+        r = p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+    # the stale search was dropped, a new one went in and came back
+    assert adopted[0] is False and adopted[1:] and all(adopted[1:]) and r.body_valid.all()

@@ -28,7 +28,7 @@ def test_a_child_solves_as_the_pipeline_itself_and_hands_back_its_state():
     seq = small_sequence(8)
     params = {'num_bodies': 2, 'window': 5, 'method': 'general', 'focal_length': 300.0}
     here, observing = Pipeline(**params), Pipeline(**params)
-    with SolveProcess(observing.params) as remote:
+    with SolveProcess(observing.params, lane=False) as remote:     # every solve in turn
         assert remote.alive
         for k, (gray, t) in enumerate(zip(seq.frames[:7], seq.stamps[:7])):
             a = here.process(gray, t)
@@ -134,3 +134,76 @@ def test_a_child_that_cannot_be_restarted_is_reported_at_every_solve(monkeypatch
         monkeypatch.undo()
         r = remote.solve(observing.observe(seq.frames[3], seq.stamps[3]), observing)
         assert remote.alive and r.problem is None
+
+
+def test_a_child_steps_the_frames_while_its_lane_runs_the_full_solves():
+    from scenes import random_scene
+    tracks, truth, _, intr = random_scene(2, 25, n_frames=90, noise=0.2, seed=3,
+                                          own_centre=True)
+    ids = np.arange(tracks.shape[0])
+    observing = Pipeline(num_bodies=2, window=10, method='general')
+    with SolveProcess(observing.params) as remote:
+        results = []
+        for k in range(tracks.shape[1]):
+            obs = observing.observe_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+            results.append(remote.solve(obs, observing))
+            time.sleep(0.03)                                 # a camera's pace
+    # the first frames wait for the lane's search (answered from the running fit), the
+    # later ones step from its answer
+    waiting = [r for r in results[4:] if not r.body_valid.any()]
+    stepped = [r for r in results[4:] if r.body_valid.all()]
+    assert waiting and len(stepped) >= 20
+    for r in stepped[-3:]:
+        for s in range(2):
+            g = int(np.bincount(truth[r.labels == s]).argmax())
+            assert np.count_nonzero((r.labels == s) & (truth != g)) <= 2
+
+
+def test_a_lane_answers_a_job_as_the_solver_and_restarts_when_killed():
+    from mlofc_ros.frame import Observation
+    from mlofc_ros.lane import SolveJob
+    from mlofc_ros.solve_process import ProcessLane
+    from mlofc_ros.solver import segment_lines
+    from scenes import random_scene
+    tracks, _, _, intr = random_scene(2, 25, n_frames=6, noise=0.2, seed=3, own_centre=True)
+    keywords = {'tracks': tracks, 'n_bodies': 2, 'intrinsics': intr, 'method': 'general'}
+    obs = Observation.skip(0.0, None, 'a test', 6)
+    lane = ProcessLane()
+    try:
+        assert lane.poll() is None and not lane.busy
+        job = SolveJob(obs, keywords, 0)
+        lane.submit(job)
+        with pytest.raises(RuntimeError, match='busy'):
+            lane.submit(job)
+        finished = None
+        for _ in range(600):
+            finished = lane.poll()
+            if finished is not None:
+                break
+            time.sleep(0.05)
+        assert finished is not None and finished[0] is job and not lane.busy
+        np.testing.assert_array_equal(finished[1].labels, segment_lines(**keywords).labels)
+        # a job that fails comes back with its exception
+        lane.submit(SolveJob(obs, dict(keywords, n_bodies=-1), 0))
+        for _ in range(600):
+            finished = lane.poll()
+            if finished is not None:
+                break
+            time.sleep(0.05)
+        assert isinstance(finished[1], ValueError)
+        # a killed child: its job comes back with the reason, the next job restarts it
+        lane.submit(job)
+        lane._process.kill()
+        lane._process.wait()
+        finished = None
+        for _ in range(100):
+            finished = lane.poll()
+            if finished is not None:
+                break
+            time.sleep(0.05)
+        assert isinstance(finished[1], SolverProcessEnded) and not lane.busy
+        lane.submit(job)
+        assert lane.busy and lane._process.poll() is None
+    finally:
+        lane.close()
+    assert lane._process is None and not lane.busy

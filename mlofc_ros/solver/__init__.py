@@ -20,7 +20,8 @@ MLOFC solver: segment line tracks into rigid bodies by their rotation. Pure nump
 """
 from .core import assign_with_motions, min_tracks_needed, segment_lines
 from .methods import get_method, Method, METHODS, WarmStart
-from .result import Diagnostics, SegmentationResult
+from .result import Diagnostics, SegmentationResult, StepNotTaken
 
 __all__ = ['assign_with_motions', 'Diagnostics', 'get_method', 'Method', 'METHODS',
-           'min_tracks_needed', 'segment_lines', 'SegmentationResult', 'WarmStart']
+           'min_tracks_needed', 'segment_lines', 'SegmentationResult', 'StepNotTaken',
+           'WarmStart']

@@ -90,7 +90,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
                   seed: int = 0, init_labels: Optional[np.ndarray] = None,
                   init_motions: Optional[Tuple[np.ndarray, np.ndarray]] = None,
                   rescan: Optional[Sequence[int]] = None, step: Optional[bool] = None,
-                  warm_inliers: Optional[float] = None,
+                  step_only: Optional[bool] = None, warm_inliers: Optional[float] = None,
                   warm_competes: Optional[bool] = None) -> SegmentationResult:
     """
     Segment line tracks into rigid bodies by their rotation (multibody line optical flow).
@@ -146,6 +146,10 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         :func:`.general_method.solve_general`); the tracked solve runs instead when too few
         tracks stay inliers or many would change body. A stream asks for full solves after
         a search and after a step whose noise jumped (:data:`.warm.FULL_AFTER_SEARCH`).
+    step_only : bool, optional
+        'general', with ``step``: when true and the step does not hold, raise
+        :class:`.StepNotTaken` instead of running the tracked solve (a caller that runs the
+        full solves elsewhere: the pipeline's solver lane, :mod:`mlofc_ros.lane`).
     warm_inliers : float, optional
         'robust', with ``init_labels``: the share of the usable tracks that the previous
         labels' final pass must keep as inliers to be returned without a search (default
@@ -176,6 +180,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         keyword the method does not accept, ``init_labels`` of another length than the tracks,
         ``warm_inliers`` outside [0, 1], malformed ``init_motions`` or ``rescan``, or fewer
         usable tracks than the model needs.
+    StepNotTaken
+        With ``step_only``: the step did not hold.
 
     """
     spec = get_method(method)
@@ -185,6 +191,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     given = {key: value for key, value in (('init_labels', init_labels),
                                            ('init_motions', init_motions),
                                            ('rescan', rescan), ('step', step),
+                                           ('step_only', step_only),
                                            ('warm_inliers', warm_inliers),
                                            ('warm_competes', warm_competes))
              if value is not None}
@@ -248,6 +255,10 @@ def _check_keywords(spec: Method, n: int, n_tracks: int, given: Dict[str, Any]
         if 'init_motions' not in given:
             raise ValueError('step needs init_motions (it advances tracked bodies)')
         out['step'] = bool(given['step'])
+    if 'step_only' in given:
+        if 'step' not in given:
+            raise ValueError('step_only needs step')
+        out['step_only'] = bool(given['step_only'])
     return out
 
 

@@ -37,7 +37,7 @@ from .general import (assign_bodies, assign_fitted, body_covariances, fit_bodies
                       WARM_INLIERS)
 from .ksubspaces import total_cost
 from .problem import Problem
-from .result import Diagnostics, SegmentationResult
+from .result import Diagnostics, SegmentationResult, StepNotTaken
 from .rotation import solve_robust
 from .spatial import spatial_neighbours
 
@@ -121,16 +121,17 @@ class _Tracked(NamedTuple):
 
 def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
                   init_motions: Optional[Tuple[np.ndarray, np.ndarray]] = None,
-                  rescan: Optional[np.ndarray] = None, step: bool = False
-                  ) -> SegmentationResult:
+                  rescan: Optional[np.ndarray] = None, step: bool = False,
+                  step_only: bool = False) -> SegmentationResult:
     """
     Solve ``problem`` with a rotation and a translation per body.
 
     ``init_labels (N,)``: the previous window's labels (``-1`` unknown, ids below n);
     ``init_motions``: its motions ``(W (n, 3), T (n, 3))``, NaN rows unknown; ``rescan (n,)``
     bool: the tracked bodies to refit from the pivot starts too. ``step``: a tracking step
-    (:func:`_step`); the tracked solve where it does not hold.
-    With fewer than :data:`MODEL_FRAMES` frames the rotation-only step answers.
+    (:func:`_step`); the tracked solve where it does not hold, or with ``step_only``
+    :class:`.StepNotTaken`. With fewer than :data:`MODEL_FRAMES` frames the rotation-only
+    step answers.
     """
     enough = problem.tracks.shape[1] >= MODEL_FRAMES
     warm = init_labels is not None and init_motions is not None
@@ -145,6 +146,8 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
                         spatial_neighbours(obs.midpoints), rescan)
         if stepped is not None:
             return stepped
+        if step_only:
+            raise StepNotTaken('the tracked bodies no longer explain the window')
     rot = solve_robust(problem, init_labels=init_labels, **ROTATION_STEP)
     if not enough:
         note = f'window has fewer than {MODEL_FRAMES} frames: rotation-only result'
@@ -158,6 +161,8 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
         stepped = _step(obs, d, f, init_labels, init_motions, neighbours, rescan)
         if stepped is not None:
             return stepped
+    if step_only and stepping:
+        raise StepNotTaken('the tracked bodies no longer explain the window')
     if warm:
         tracked = _track(obs, rot, init_labels, init_motions, neighbours)
     if tracked is None:

@@ -161,3 +161,12 @@ class SegmentationResult:
     def n_bodies(self) -> int:
         """Return the number of bodies in the model."""
         return int(self.angular_velocities.shape[0])
+
+
+class StepNotTaken(Exception):
+    """
+    A tracking step asked for alone (``step_only``) did not hold: no answer for this window.
+
+    The caller runs the full solve elsewhere (the pipeline's solver lane,
+    :mod:`mlofc_ros.lane`) and answers the frame from its running fit.
+    """
