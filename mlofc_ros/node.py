@@ -54,7 +54,11 @@ the same thread (:meth:`Pipeline.solve`, then publishing). A slow method's
 segments the newest window it has not solved yet while the tracking worker goes on: the
 tracker still sees every frame, so its tracks survive. With ``solver_process`` (the default)
 that worker hands the window to a child process (:class:`mlofc_ros.solve_process.SolveProcess`)
-and waits: the solver gets a core of its own instead of half the interpreter. Of the frames
+and waits: the solver gets a core of its own instead of half the interpreter. The child
+steps the window from the running fit (20-100 ms) and runs the searches and full solves
+the method asks for in one more child, a solver lane (:mod:`mlofc_ros.lane`), whose answer
+becomes the running fit when it comes back; a frame it cannot step is answered from the
+running fit (below). Of the frames
 tracked while the solver was busy it solves the newest next; the others (``unsolved`` in
 ``stats``, counted as dropped) are answered from the running fit (:meth:`Pipeline.carry`):
 their ``~/segments`` cloud gives each segment the body its track had at the last solve (NaN

@@ -189,8 +189,9 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
     ParamSpec('solver_process', bool, True,
               'Solve a slow method (general) in a child process of the node, so that the '
               'solver has a core of its own beside the tracking (in a thread, the two share '
-              "one: Python's interpreter lock); false = a thread. Changing it, or method "
-              'between a slow and a fast one, at run time restarts the body ids.',
+              "one: Python's interpreter lock), its searches and full solves in one more "
+              'child while the frames step; false = a thread, every solve in turn. Changing '
+              'it, or method between a slow and a fast one, at run time restarts the body ids.',
               scope='node'),
     ParamSpec('warn_period', float, 5.0,
               'Minimum seconds between two warnings about the same kind of bad input.',

@@ -150,7 +150,6 @@ class Pipeline:
         self._lane: Any = None
         self._generation = 0
         self._from_running_fit = False
-        self._relabel_next = False
 
     # --- configuration -------------------------------------------------------------------
 
@@ -726,53 +725,54 @@ class Pipeline:
         Step the window of ``obs``; hand a search or full solve that is due to ``lane``.
 
         Returns the result (None: answer from the running fit). The lane's finished job, if
-        any, first becomes the running fit.
+        any, first becomes the running fit, and this step starts from it.
         """
         finished = lane.poll()
-        if finished is not None:
-            self._adopt(finished, problems)
+        adopted = finished is not None and self._adopt(finished, problems)
         keywords = self._warm.keywords(method, self.bodies.previous_labels(obs.win_ids), n)
         common = {'intrinsics': obs.intrinsics, 'image_size': obs.image_size,
-                  'seed': int(self.params['seed'])}
-        if not keywords.get('step'):
-            # a search or a full solve is due: the lane's, from the running fit as it is now
-            if not lane.busy:
-                lane.submit(SolveJob(dataclasses.replace(obs, gray=None),
-                                     dict(common, tracks=obs.win_tracks, n_bodies=n,
-                                          method=method.name, **keywords),
-                                     self._generation))
-            if 'init_motions' not in keywords:
-                # nothing to step from before the first search
-                self._from_running_fit = True
-                return None
+                  'seed': int(self.params['seed']), 'method': method.name}
+        if not lane.busy and self._warm.full_solve_due():
+            # a search or a full solve, from the running fit as it is now
+            lane.submit(SolveJob(dataclasses.replace(obs, gray=None),
+                                 dict(common, tracks=obs.win_tracks, n_bodies=n, **keywords),
+                                 self._generation))
+        if 'init_motions' not in keywords:
+            self._from_running_fit = True         # nothing to step from before the first search
+            return None
+        if not keywords.get('step'):              # meanwhile a step, without rescans
             keywords = {k: v for k, v in keywords.items() if k != 'rescan'}
             keywords['step'] = True
-        if self._relabel_next:
-            # the first step from a lane's answer: its labels are of a window the stream has
-            # since moved on from (by the solve's duration), the motions still hold; every
-            # track is assigned at them afresh instead of most failing the step's guard
+        if adopted:
+            # the answer's labels are of a window the stream has since left (by the solve's
+            # duration), its motions still hold: every track is labelled afresh at them
+            # (most of the labels failed the step's guard: bench live own2+bg / own3+bg at
+            # 30 Hz, offline with the solves' measured CPU, frames answered from the running
+            # fit 37 / 58 -> 20 / 33 of 150, wrong from frame 90 on 4.4 / 8.0 -> 2.8 / 7.1%)
             keywords['init_labels'] = np.full_like(keywords['init_labels'], -1)
-            self._relabel_next = False
         try:
-            return segment_lines(obs.win_tracks, n, method=method.name, step_only=True,
-                                 **common, **keywords)
+            return segment_lines(obs.win_tracks, n, step_only=True, **common, **keywords)
         except StepNotTaken:
             self._warm.full_next = True           # the lane's full solve next
             self._from_running_fit = True
             return None
 
-    def _adopt(self, finished: Finished, problems: List[str]) -> None:
-        """Make a lane's answer the running fit (state only: its frame was answered)."""
+    def _adopt(self, finished: Finished, problems: List[str]) -> bool:
+        """
+        Make a lane's answer the running fit (its frame was answered); return whether.
+
+        Not an answer that failed (said in ``problems``) or that started before a reset.
+        """
         job, result = finished
         if job.generation != self._generation:
-            return                                # started before a reset: stale
+            return False
         if isinstance(result, Exception):
             problems.append(f'full solve: {type(result).__name__}: {result}')
-            return
+            return False
         self._warm.solved(get_method(job.keywords['method']), result, job.obs.stamp,
                           job.obs.frame_interval)
         self._publish(job.obs, result, [])
-        self._relabel_next = True
+        return True
 
     def _publish(self, obs: Observation, res: SegmentationResult, problems: List[str]
                  ) -> Dict[str, Any]:

@@ -930,8 +930,7 @@ def test_a_lane_answer_started_before_a_reconfiguration_is_dropped(change, monke
     real = pipeline_module.Pipeline._adopt
     monkeypatch.setattr(pipeline_module.Pipeline, '_adopt',
                         lambda self, finished, problems: adopted.append(
-                            finished[0].generation == self._generation)
-                        or real(self, finished, problems))
+                            real(self, finished, problems)) or adopted[-1])
     if change == 'reconfigure':
         p.reconfigure(seed=7)
     else:

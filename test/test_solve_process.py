@@ -159,6 +159,17 @@ def test_a_child_steps_the_frames_while_its_lane_runs_the_full_solves():
             assert np.count_nonzero((r.labels == s) & (truth != g)) <= 2
 
 
+def _answer(lane, timeout=30.0):
+    """Poll ``lane`` until its job is back (None after ``timeout`` seconds)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        finished = lane.poll()
+        if finished is not None:
+            return finished
+        time.sleep(0.05)
+    return None
+
+
 def test_a_lane_answers_a_job_as_the_solver_and_restarts_when_killed():
     from mlofc_ros.frame import Observation
     from mlofc_ros.lane import SolveJob
@@ -175,32 +186,18 @@ def test_a_lane_answers_a_job_as_the_solver_and_restarts_when_killed():
         lane.submit(job)
         with pytest.raises(RuntimeError, match='busy'):
             lane.submit(job)
-        finished = None
-        for _ in range(600):
-            finished = lane.poll()
-            if finished is not None:
-                break
-            time.sleep(0.05)
+        finished = _answer(lane)
         assert finished is not None and finished[0] is job and not lane.busy
         np.testing.assert_array_equal(finished[1].labels, segment_lines(**keywords).labels)
         # a job that fails comes back with its exception
         lane.submit(SolveJob(obs, dict(keywords, n_bodies=-1), 0))
-        for _ in range(600):
-            finished = lane.poll()
-            if finished is not None:
-                break
-            time.sleep(0.05)
+        finished = _answer(lane)
         assert isinstance(finished[1], ValueError)
         # a killed child: its job comes back with the reason, the next job restarts it
         lane.submit(job)
         lane._process.kill()
         lane._process.wait()
-        finished = None
-        for _ in range(100):
-            finished = lane.poll()
-            if finished is not None:
-                break
-            time.sleep(0.05)
+        finished = _answer(lane)
         assert isinstance(finished[1], SolverProcessEnded) and not lane.busy
         lane.submit(job)
         assert lane.busy and lane._process.poll() is None

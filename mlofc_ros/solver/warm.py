@@ -130,7 +130,7 @@ class WarmStarts:
                 if stable in self.motions:
                     w[body], t[body] = self.motions[stable]
             out['init_motions'] = (w, t)
-            if method.accepts('step') and self.full_due == 0 and not self.full_next:
+            if method.accepts('step') and not self.full_solve_due():
                 out['step'] = True
                 self._rescanned = None
                 if self.until_rescan <= 0:
@@ -145,6 +145,10 @@ class WarmStarts:
             out['warm_inliers'] = min(floor, WARM_INLIERS)
             self.floor = (floor, left - 1) if left > 1 else None
         return out
+
+    def full_solve_due(self) -> bool:
+        """Whether the next solve of a method that steps is a search or a full solve."""
+        return not self.motions or self.full_due > 0 or self.full_next
 
     def solved(self, method: Method, res: SegmentationResult, stamp: float = math.nan,
                interval: float = math.nan) -> None:
