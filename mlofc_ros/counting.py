@@ -35,8 +35,9 @@ the richer model's (so that the poorer cannot hide behind a larger noise), a cha
 win by :data:`SCORE_MARGIN`, and for :data:`HOLD` solves after a change the count does not go
 back (no flicker between two counts that score alike). A trial costs a warm solve, a search
 10-30 of them: on the scheduled stream of ``bench count`` the automatic count costs 0.9-1.4x
-the CPU of the count given with ``'robust'``, 0.8-2.9x with ``'general'`` (whose warm solve
-is a tracked solve, not a 20 ms step).
+the CPU of the count given with ``'robust'``, 0.7-2.3x with ``'general'`` (whose trial of one
+more body is a step when the step holds, its new body fitted from the pivot starts, else a
+tracked solve: 0.75-2.9x when every such trial was a tracked solve).
 """
 from typing import Callable, Optional, Sequence, Tuple
 
