@@ -78,6 +78,15 @@ def _serve(conn: Connection) -> None:
         pipeline.use_lane(ProcessLane())
         if get_method(pipeline.params['method']).accepts('step_only'):
             pipeline.lane.start()
+    try:
+        _serve_requests(conn, pipeline, run_job)
+    finally:
+        if pipeline.lane is not None:
+            pipeline.lane.close()                       # its job is not wanted any more
+
+
+def _serve_requests(conn: Connection, pipeline: 'Pipeline', run_job: Any) -> None:
+    """Child: answer the requests on ``conn`` with ``pipeline`` until told to stop or it closes."""
     while True:
         try:
             request, payload = conn.recv()

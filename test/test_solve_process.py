@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+from typing import List
 
 from mlofc_ros.pipeline import FOCAL_SAMPLES, Pipeline
 from mlofc_ros.solve_process import SolveProcess, SolverProcessEnded, SolverProcessError
@@ -97,23 +98,37 @@ def running(pid: int) -> bool:
         return False
 
 
-def test_the_child_ends_with_its_parent_even_killed():
+def children(pid: int) -> List[int]:
+    """Return the process ids of the children of ``pid`` (Linux)."""
+    try:
+        with open(f'/proc/{pid}/task/{pid}/children') as f:
+            return [int(c) for c in f.read().split()]
+    except FileNotFoundError:
+        return []
+
+
+def test_the_child_and_its_lane_end_with_their_parent_even_killed():
     code = ('from mlofc_ros.solve_process import SolveProcess\n'
             'import time\n'
-            'remote = SolveProcess({"num_bodies": 2})\n'
+            'remote = SolveProcess({"num_bodies": 2, "method": "general"})\n'
             'print(remote.pid, flush=True)\n'
             'time.sleep(60)\n')
     parent = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True)
     try:
         pid = int(parent.stdout.readline())
         assert running(pid)
+        deadline = time.monotonic() + 20.0
+        while not children(pid) and time.monotonic() < deadline:
+            time.sleep(0.1)                         # 'general': its lane starts with it
+        lane = children(pid)
+        assert len(lane) == 1 and running(lane[0])
         parent.send_signal(signal.SIGKILL)
         parent.wait(10.0)
         deadline = time.monotonic() + 20.0
-        # orphaned, it sees the end of its input and exits
-        while running(pid) and time.monotonic() < deadline:
+        # orphaned, each sees the end of its input and exits
+        while (running(pid) or running(lane[0])) and time.monotonic() < deadline:
             time.sleep(0.1)
-        assert not running(pid)
+        assert not running(pid) and not running(lane[0])
     finally:
         parent.kill()
         parent.wait()
