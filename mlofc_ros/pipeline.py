@@ -745,10 +745,11 @@ class Pipeline:
             keywords['step'] = True
         if adopted:
             # the answer's labels are of a window the stream has since left (by the solve's
-            # duration), its motions still hold: every track is labelled afresh at them
-            # (most of the labels failed the step's guard: bench live own2+bg / own3+bg at
-            # 30 Hz, offline with the solves' measured CPU, frames answered from the running
-            # fit 37 / 58 -> 20 / 33 of 150, wrong from frame 90 on 4.4 / 8.0 -> 2.8 / 7.1%)
+            # duration), its motions still hold: every track is labelled afresh at them (kept,
+            # too many failed the step's guard: own2+bg / own3+bg at 30 Hz replayed offline,
+            # each solve's CPU x1.3 its delay, render seeds 0-2, 150 frames, frames answered
+            # from the running fit 52 / 50 -> 23 / 12, wrong from frame 90 on 5.7 / 8.3 ->
+            # 4.3 / 2.7%)
             keywords['init_labels'] = np.full_like(keywords['init_labels'], -1)
         try:
             return segment_lines(obs.win_tracks, n, step_only=True, **common, **keywords)

@@ -269,6 +269,8 @@ class ProcessLane:
 
     def start(self) -> None:
         """Start the child now (it imports numpy and OpenCV: about a second) if not running."""
+        if self._process is not None and self._process.poll() is not None:
+            self.close()                                # it ended while idle
         if self._process is None:
             self._process, self._conn = _spawn({}, lane=False, group=False)
 
@@ -277,7 +279,12 @@ class ProcessLane:
         if self.busy:
             raise RuntimeError('the lane is busy')
         self.start()
-        self._conn.send(('job', job.keywords))
+        try:
+            self._conn.send(('job', job.keywords))
+        except OSError:                                 # it ended since: once more, afresh
+            self.close()
+            self.start()
+            self._conn.send(('job', job.keywords))
         self._job = job
 
     def poll(self) -> Optional['Finished']:
@@ -289,10 +296,10 @@ class ProcessLane:
                 return None
             status, reply = self._conn.recv()
         except (EOFError, OSError):
-            code = self._process.poll()
+            job, code = self._job, self._process.poll()
             self.close()
-            status, reply = 'ended', SolverProcessEnded(
-                f'the solver lane process ended (exit code {code}); restarted at the next job')
+            return job, SolverProcessEnded(f'the solver lane process ended (exit code '
+                                           f'{code}); restarted at the next job')
         job, self._job = self._job, None
         if status == 'error':
             reply = SolverProcessError(f'in the solver lane process: {reply}')

@@ -213,9 +213,17 @@ def test_a_lane_answers_a_job_as_the_solver_and_restarts_when_killed():
         lane._process.kill()
         lane._process.wait()
         finished = _answer(lane)
-        assert isinstance(finished[1], SolverProcessEnded) and not lane.busy
+        assert finished[0] is job and isinstance(finished[1], SolverProcessEnded)
+        assert not lane.busy
         lane.submit(job)
         assert lane.busy and lane._process.poll() is None
+        assert _answer(lane)[0] is job
+        # a child killed while idle: the next job starts another
+        lane._process.kill()
+        lane._process.wait()
+        lane.submit(job)
+        finished = _answer(lane)
+        assert finished[0] is job and finished[1].labels.shape == (tracks.shape[0],)
     finally:
         lane.close()
     assert lane._process is None and not lane.busy
