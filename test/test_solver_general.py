@@ -581,9 +581,10 @@ def test_a_tracking_step_falls_back_to_the_tracked_solve_where_it_cannot_step():
     assert res.diagnostics.start not in ('step', 'warm')   # no body has a motion: a search
     # a caller that runs the full solves elsewhere (a solver lane) asks for the step alone
     from mlofc_ros.solver import StepNotTaken
-    with pytest.raises(StepNotTaken):
-        segment_lines(tracks[:, 1:], 2, intrinsics=intr, method='general', init_labels=few,
-                      init_motions=(unknown, t0), step=True, step_only=True)
+    for given in ({'intrinsics': intr}, {'image_size': (2 * C, 2 * C)}):   # f known, unknown
+        with pytest.raises(StepNotTaken):
+            segment_lines(tracks[:, 1:], 2, method='general', init_labels=few,
+                          init_motions=(unknown, t0), step=True, step_only=True, **given)
     with pytest.raises(ValueError, match='step_only needs step'):
         segment_lines(tracks, 2, intrinsics=intr, method='general', init_labels=truth,
                       init_motions=(w0, t0), step_only=True)
