@@ -754,7 +754,7 @@ class Pipeline:
         try:
             return segment_lines(obs.win_tracks, n, step_only=True, **common, **keywords)
         except StepNotTaken:
-            self._warm.full_next = True           # the lane's full solve next
+            self._warm.step_declined()            # the lane's full solve next
             self._from_running_fit = True
             return None
 

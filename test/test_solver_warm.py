@@ -182,3 +182,21 @@ def test_rescans_back_off_while_they_change_no_basin():
     # a full solve brings the rescans back too
     solve('warm')
     assert steps_between(n) == [RESCAN_EVERY] * n
+
+
+def test_a_declined_step_asks_for_a_full_solve_and_made_no_rescan():
+    # a step that did not hold (StepNotTaken, the solver lane's steps): the next solve is a
+    # full one, and the rescan the declined step was asked for is not counted as made
+    from mlofc_ros.solver.methods import GENERAL
+    from mlofc_ros.solver.warm import FULL_AFTER_SEARCH, WarmStarts
+    warm, labels, n = WarmStarts(), np.zeros(6, dtype=np.int64), 2
+    _general_solve(warm, labels, n, 'spatial', np.full((n, 3), 0.01), stamp=0.0)
+    for _ in range(FULL_AFTER_SEARCH):            # past the full solves after the search
+        _general_solve(warm, labels, n, 'warm', np.full((n, 3), 0.01), stamp=1.0)
+    while warm.until_rescan > 0:
+        _general_solve(warm, labels, n, 'step', np.full((n, 3), 0.01), stamp=2.0)
+    kw = warm.keywords(GENERAL, labels, n)       # this step rescans a body, and is declined
+    assert kw['step'] and kw['rescan'] and not warm.full_solve_due()
+    warm.step_declined()
+    assert warm.full_solve_due() and 'step' not in warm.keywords(GENERAL, labels, n)
+    assert warm._rescanned is None

@@ -146,6 +146,11 @@ class WarmStarts:
             self.floor = (floor, left - 1) if left > 1 else None
         return out
 
+    def step_declined(self) -> None:
+        """Note a step that did not hold (``StepNotTaken``): a full solve next, no rescan made."""
+        self.full_next = True
+        self._rescanned = None
+
     def full_solve_due(self) -> bool:
         """Whether the next solve of a method that steps is a search or a full solve."""
         return not self.motions or self.full_due > 0 or self.full_next
