@@ -64,7 +64,6 @@ class SolverProcessEnded(SolverProcessError):
 
 def _serve(conn: Connection) -> None:
     """Child: solve the observations received on ``conn`` until told to stop or it closes."""
-    from mlofc_ros.lane import run_job
     from mlofc_ros.pipeline import Pipeline
     from mlofc_ros.solver import get_method
     try:
@@ -79,14 +78,15 @@ def _serve(conn: Connection) -> None:
         if get_method(pipeline.params['method']).accepts('step_only'):
             pipeline.lane.start()
     try:
-        _serve_requests(conn, pipeline, run_job)
+        _serve_requests(conn, pipeline)
     finally:
         if pipeline.lane is not None:
             pipeline.lane.close()                       # its job is not wanted any more
 
 
-def _serve_requests(conn: Connection, pipeline: 'Pipeline', run_job: Any) -> None:
+def _serve_requests(conn: Connection, pipeline: 'Pipeline') -> None:
     """Child: answer the requests on ``conn`` with ``pipeline`` until told to stop or it closes."""
+    from mlofc_ros.lane import run_job
     while True:
         try:
             request, payload = conn.recv()
@@ -137,6 +137,14 @@ def _spawn(params: Mapping[str, Any], lane: bool, group: bool = True
     conn = Connection(ours.detach())
     conn.send((dict(params), lane))
     return process, conn
+
+
+def _end(process: subprocess.Popen, conn: Connection) -> None:
+    """Kill a child that still runs, wait for it, close our end of its socket."""
+    if process.poll() is None:
+        process.kill()
+        process.wait(CLOSE_TIMEOUT)
+    conn.close()
 
 
 class SolveProcess:
@@ -230,10 +238,7 @@ class SolveProcess:
                 process.wait(CLOSE_TIMEOUT)
             except (OSError, ValueError, subprocess.TimeoutExpired):
                 pass
-        if process.poll() is None:
-            process.kill()
-            process.wait(CLOSE_TIMEOUT)
-        self._conn.close()
+        _end(process, self._conn)
 
     def close(self) -> None:
         """End the child process (idempotent)."""
@@ -308,12 +313,8 @@ class ProcessLane:
     def close(self) -> None:
         """End the child (at once: a job it holds is dropped)."""
         process, self._process, self._job = self._process, None, None
-        if process is None:
-            return
-        if process.poll() is None:
-            process.kill()
-            process.wait(CLOSE_TIMEOUT)
-        self._conn.close()
+        if process is not None:
+            _end(process, self._conn)
 
 
 if __name__ == '__main__':
