@@ -301,25 +301,6 @@ def test_rescan_lets_a_tracked_body_leave_a_wrong_basin():
         assert err[True] > 0.5 and err[False] < 0.1
 
 
-def test_a_step_rescan_lets_a_tracked_body_leave_a_wrong_basin():
-    # the same in a step (its rescan at the published noise): the stepped motion is published
-    for seed in (6, 11):
-        tracks, w = small_spinning_body(seed)
-        obs = LineObservations(tracks, (F, F, C, C))
-        ray = obs.rays.sum(axis=0) / np.linalg.norm(obs.rays.sum(axis=0))
-        w0 = np.cross(w, ray)
-        err = {}
-        for rescan in (None, [0]):
-            res = segment_lines(tracks, 1, intrinsics=(F, F, C, C), method='general',
-                                init_labels=np.zeros(len(tracks), dtype=np.int64),
-                                init_motions=(w0[None], pivot_translation(w0, 2.0 * ray)[None]),
-                                rescan=rescan, step=True, step_only=True)
-            assert res.diagnostics.start == 'step'
-            err[rescan is None] = (np.linalg.norm(res.angular_velocities[0] - w)
-                                   / np.linalg.norm(w))
-        assert err[True] > 0.5 and err[False] < 0.05
-
-
 def test_published_rotation_is_a_refit_of_the_segmentation_motion():
     # the published W is refit at a small fraction of the noise (PUBLISH_NOISE_SCALE) from the
     # motion the labels were made with, which the result keeps beside it
@@ -550,7 +531,7 @@ def test_a_tracking_step_advances_the_bodies_without_a_search(monkeypatch):
     init = truth.copy()
     init[::7] = -1                                       # new tracks have no label yet
     searched, rotation_only = [], []
-    monkeypatch.setattr(general_method, 'fit_bodies_multistart',
+    monkeypatch.setattr(general_method, 'fit_body_multistart',
                         lambda *a, **k: searched.append(1))
     real = general_method.solve_robust
     monkeypatch.setattr(general_method, 'solve_robust',

@@ -134,9 +134,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     rescan : sequence of int, optional
         'general', with ``init_motions``: bodies (ids in ``[0, n)``) whose tracked motion is
         also refitted from the pivot starts of the multi-start search
-        (:func:`.general.pivot_starts`, a turn about a point on the body's ray, robust line
-        cost, at the measured noise level; in a ``step`` at the published one), which wins
-        when cheaper
+        (:func:`.general.pivot_starts`, a turn about a point on the body's ray, at the
+        measured noise level, robust line cost), which wins when cheaper
         (:data:`.general_method.RESCAN_MARGIN`). A body tracked in a wrong basin (a wrong
         pivot, the depth-reversed motion) otherwise keeps it window after window. The labels
         follow in the next window.

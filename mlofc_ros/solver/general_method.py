@@ -26,12 +26,12 @@ rotation is a further refit at a fraction of that noise (:data:`PUBLISH_NOISE_SC
 """
 from dataclasses import replace
 from types import MappingProxyType
-from typing import Mapping, NamedTuple, Optional, Sequence, Tuple
+from typing import Mapping, NamedTuple, Optional, Tuple
 
 import numpy as np
 
 from .general import (assign_bodies, assign_fitted, body_covariances, fit_bodies,
-                      fit_bodies_multistart, general_search,
+                      fit_bodies_multistart, fit_body, fit_body_multistart, general_search,
                       general_warm, LineObservations, marginal_segmentation, measured_noise,
                       NOISE_FACTOR, polish_bodies, rescale_translations, spatial_labels,
                       WARM_INLIERS)
@@ -71,9 +71,8 @@ PUBLISH_NOISE_SCALE: Optional[float] = 0.01
 
 #: A rescanned body (``rescan`` of :func:`.segment_lines`) takes the pivot search's fit
 #: whenever it is cheaper than the tracked one by this share of its cost. The final refit of
-#: every body and the full solve's rescan use the robust (Cauchy) line cost at the measured
-#: noise, a step's rescan the robust cost at the published noise (:func:`_step`), the warm
-#: and segmentation fits least squares (the robust cost in
+#: every body and the rescan's pivot search and comparison use the robust (Cauchy) line cost
+#: at the measured noise, the warm and segmentation fits least squares (the robust cost in
 #: every fit as well measured 4.2 / 9.4 / 6.4 / 8.8 -> 7.8 / 11.9 / 2.7 / 1.5 on an earlier
 #: front end: better without a background body and worse with one). Spinning benchmark,
 #: window 10, six seeds, mean wrong % own2+bg / own3+bg / own2 / own3, least squares ->
@@ -240,18 +239,8 @@ def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
     (:data:`PUBLISH_NOISE_SCALE` of the measured one, robust cost), so that the state a
     stream carries is the unbiased motion the full solve publishes (steps at the inflated
     segmentation noise drifted towards rotation-only: 5-29% wrong, boxes 40-100% off);
-    bodies marked in ``rescan`` are also refit from the pivot starts (:func:`_rescanned`) at
-    the published noise too: at the measured one the marginalised model's minimum of a
-    spinning box can itself be off (the prior on the line directions: an own3+bg box's LM
-    from its true motion ended 25-30% off in omega there, 1-3% at the published noise), and
-    a rescan fitted and compared there kept that basin frame after frame (spinning boxes,
-    window 10, 30 frames, render seeds 0-11, own2+bg / own3+bg / own2 / own3 / wide2+bg /
-    wide3: boxes within 5% of their omega 19 / 29 / 23 / 31 / 12 / 17 -> 20 / 31 / 24 / 33 /
-    15 / 18, frames with a NEES above 900, 30 sigma, 13 / 18 / 5 / 13 / 38 / 37 -> 14 / 14 /
-    2 / 8 / 31 / 28%, mean wrong % 1.71 / 3.52 / 0.12 / 1.94 / 7.32 / 0.39 -> 2.36 / 3.37
-    / 0.08 / 2.30 / 6.28 / 0.33, own2+bg seed 6 5.2 -> 18.0%; Hopkins155 streamed, three
-    motions, K = 5, 11.0 -> 11.7%).
-    A body without a motion (a new one: the automatic count's trial of one more body, its
+    bodies marked in ``rescan`` are also refit from the pivot starts (:func:`_rescanned`), and
+    a body without a motion (a new one: the automatic count's trial of one more body, its
     tracks labelled) starts from them instead of a tracked solve (bench count's ``general``
     stream, six seeds: the same counts frame by frame, its CPU 2.0 -> 1.8x the count
     given's on the mean).
@@ -291,10 +280,9 @@ def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
     if moved:                       # every body's LM steps in one lockstep batch
         W[moved], T[moved], _ = fit_bodies(obs, [members[b] for b in moved], W[moved],
                                            T[moved], STEP_ITERATIONS, fine, fine)
-    again = [b for b in moved if rescan is not None and rescan[b]]
-    if again:
-        W[again], T[again] = _rescanned(obs, [members[b] for b in again], W[again], T[again],
-                                        fine, RESCAN_ITERATIONS)
+    for b in moved:                                                  # bodies, not lines
+        if rescan is not None and rescan[b]:
+            W[b], T[b] = _rescanned(obs, members[b], W[b], T[b], sigma2)
     fitted: list = []
     sigma2 = measured_noise(obs, W, T, fitted)
     # the labels at the segmentation's inflated noise level, where T's scale matters: the
@@ -316,21 +304,21 @@ def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
     return _result(obs, diagnostics, focal_length, sol, sigma2, 0, fitted[0])
 
 
-def _rescanned(obs: LineObservations, members: Sequence[np.ndarray], W: np.ndarray,
-               T: np.ndarray, noise: float, iterations: int) -> Tuple[np.ndarray, np.ndarray]:
+def _rescanned(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
+               sigma2: float) -> Tuple[np.ndarray, np.ndarray]:
     """
-    Return the bodies' motions ``W, T (B, 3)``, each the pivot search's where it fits better.
+    Return a stepped body's motion, or the pivot search's when that fits its tracks better.
 
-    ``members``: each body's tracks; ``noise`` (px^2): the level at which the pivot search's
-    LM runs (``iterations``) and the comparison with the body's motion as it is are made, on
-    the robust cost; a body keeps its motion where the search's is not cheaper
-    (:data:`RESCAN_MARGIN`).
+    As the full solve's rescan (:func:`_refit_bodies`): compared on the robust cost at the
+    measured noise ``sigma2``; the winner is refit at the published noise level.
     """
-    here = fit_bodies(obs, members, W, T, 0, noise, noise)[2]
-    alt = fit_bodies_multistart(obs, members, W, T, iterations, 1, noise, robust=noise,
-                                per_rate=True)
-    take = alt[2] < (1.0 - RESCAN_MARGIN) * here
-    return np.where(take[:, None], alt[0], W), np.where(take[:, None], alt[1], T)
+    fine = sigma2 * PUBLISH_NOISE_SCALE
+    here = fit_body(obs, idx, w, t, 0, sigma2, sigma2)[2]
+    alt = fit_body_multistart(obs, idx, w, t, RESCAN_ITERATIONS, 1, sigma2, obs.body_ray(idx),
+                              robust=sigma2, per_rate=True)
+    if not alt[2] < (1.0 - RESCAN_MARGIN) * here:
+        return w, t
+    return fit_body(obs, idx, alt[0], alt[1], STEP_ITERATIONS, fine, fine)[:2]
 
 
 def _search(obs: LineObservations, rot: SegmentationResult, init_labels: Optional[np.ndarray],
@@ -356,23 +344,23 @@ def _refit_bodies(obs: LineObservations, sol: dict, sigma2: float, rescan: np.nd
     window's motion, so a wrong basin -- a pivot, the depth reversal -- would stay window after
     window) is also refit from the full search's pivot starts, compared at the measured noise
     (the inflated one flattens the cost and often prefers a wrong basin), and keeps the
-    cheaper fit (:func:`_rescanned`). Not at the published noise, as a step's rescan: bench
-    count's ``general`` stream (render seeds 0-5) then found 5 bodies for 4 for ten frames in
-    three seeds, right in 84% of the settled frames instead of 95%; Hopkins155 streamed,
-    three motions, 11.4% against 11.7% with the steps' rescans alone at the published noise
-    (11.0% with none).
+    cheaper fit (:data:`RESCAN_MARGIN`).
     """
     labels = sol['labels']
     members = [np.flatnonzero(labels == b) for b in range(sol['W'].shape[0])]
     some = [b for b, idx in enumerate(members) if idx.size >= 3]    # bodies, not lines
     if not some:
         return
-    W, T, _ = polish_bodies(obs, [members[b] for b in some], sol['W'][some],
-                            sol['T'][some], POLISH_ITERATIONS, sigma2, sigma2)
+    W, T, cost = polish_bodies(obs, [members[b] for b in some], sol['W'][some],
+                               sol['T'][some], POLISH_ITERATIONS, sigma2, sigma2)
     again = [i for i, b in enumerate(some) if rescan[b]]
     if again:
-        W[again], T[again] = _rescanned(obs, [members[some[i]] for i in again], W[again],
-                                        T[again], sigma2, POLISH_ITERATIONS)
+        alt = fit_bodies_multistart(obs, [members[some[i]] for i in again], W[again],
+                                    T[again], POLISH_ITERATIONS, 1, sigma2, robust=sigma2,
+                                    per_rate=True)
+        take = alt[2] < (1.0 - RESCAN_MARGIN) * cost[again]
+        keep = np.asarray(again)[take]
+        W[keep], T[keep] = alt[0][take], alt[1][take]
     sol['W'][some], sol['T'][some] = W, T
 
 

@@ -27,11 +27,13 @@ mean the covariance claims more than the estimate delivers (a filter fusing it w
 too much).
 
 Rows: ``general`` (each body's covariance scaled by its reduced chi-square when above 1,
-:func:`mlofc_ros.solver.general.body_covariance`) on every scene, and, as the reference,
+:func:`mlofc_ros.solver.general.body_covariance`) on every scene (the wide families: slow
+boxes, whose fitted minimum itself is biased, docs/design/general.md), and, as the reference,
 ``robust`` (rotation-only, the default method) on the camera-centre scene where its model
 holds. Boxes
 are split by their omega error: a box fitted in a wrong basin (error > 5%) is a second
-minimum, which no local covariance covers.
+minimum, which no local covariance covers. Last column: the share of all the boxes' frames
+whose NEES is above 900, a 30-sigma miss (issue #39 asks for none).
 """
 import argparse
 import math
@@ -44,10 +46,13 @@ import numpy as np
 #: chi-square quantiles, 3 degrees of freedom: median and 95%.
 CHI2_3_MEDIAN, CHI2_3_95 = 2.366, 7.815
 
+#: NEES of a 30-sigma miss (issue #39: never).
+NEES_30_SIGMA = 900.0
+
 #: (label, scene, method, window)
 CONFIGS: Tuple[Tuple[str, str, str, int], ...] = tuple(
     [(f'{scene} general', scene, 'general', 10)
-     for scene in ('own2+bg', 'own3+bg', 'own2', 'own3', 'cam2+bg')]
+     for scene in ('own2+bg', 'own3+bg', 'own2', 'own3', 'cam2+bg', 'wide2+bg', 'wide3')]
     + [('cam2+bg robust', 'cam2+bg', 'robust', 5)])
 
 
@@ -117,13 +122,15 @@ def summary_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
             continue
         good = [b for b in boxes if b['omega_err'] <= 0.05]
         bad = [b for b in boxes if b['omega_err'] > 0.05]
-        rows.append([label, window] + _stats(good) + _stats(bad) + _stats(boxes))
+        frames = np.concatenate([b['nees'] for b in boxes])
+        rows.append([label, window] + _stats(good) + _stats(bad) + _stats(boxes)
+                    + [100.0 * float(np.mean(frames > NEES_30_SIGMA))])
     return rows
 
 
 HEADERS = ['scene, method', 'window', 'boxes err <= 5%', 'NEES median',
            'frames NEES <= 7.81', 'boxes err > 5%', 'NEES median', 'frames NEES <= 7.81',
-           'all boxes', 'NEES median', 'frames NEES <= 7.81']
+           'all boxes', 'NEES median', 'frames NEES <= 7.81', '% frames NEES > 900 (30 sigma)']
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
