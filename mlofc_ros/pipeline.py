@@ -682,11 +682,13 @@ class Pipeline:
         method = get_method(self.params['method']).for_window(obs.window_fill,
                                                               int(self.params['window']))
 
+        # the solver's keywords for this window, warm starts aside
+        common = {'intrinsics': obs.intrinsics, 'image_size': obs.image_size,
+                  'seed': int(self.params['seed']), 'method': method.name}
+
         def solve(n: int, labels: Optional[np.ndarray],
                   ids: Optional[Sequence[int]] = None) -> SegmentationResult:
-            return segment_lines(obs.win_tracks, n, intrinsics=obs.intrinsics,
-                                 image_size=obs.image_size, method=method.name,
-                                 seed=int(self.params['seed']),
+            return segment_lines(obs.win_tracks, n, **common,
                                  **self._warm.keywords(method, labels, n, ids))
 
         def counted(n: int, labels: Optional[np.ndarray],
@@ -699,7 +701,7 @@ class Pipeline:
         lane = (self._lane if n_req > 0 and method.accepts('step_only') else None)
         try:
             if lane is not None:
-                res = self._step_beside_lane(obs, method, n_req, lane, problems)
+                res = self._step_beside_lane(obs, method, n_req, lane, common, problems)
                 if res is None:
                     return None
             elif n_req > 0:
@@ -720,18 +722,18 @@ class Pipeline:
         return res
 
     def _step_beside_lane(self, obs: Observation, method: Method, n: int, lane: Any,
-                          problems: List[str]) -> Optional[SegmentationResult]:
+                          common: Dict[str, Any], problems: List[str]
+                          ) -> Optional[SegmentationResult]:
         """
         Step the window of ``obs``; hand a search or full solve that is due to ``lane``.
 
-        Returns the result (None: answer from the running fit). The lane's finished job, if
-        any, first becomes the running fit, and this step starts from it.
+        ``common``: the solver's keywords for the window (camera, seed, method), warm starts
+        aside. Returns the result (None: answer from the running fit). The lane's finished
+        job, if any, first becomes the running fit, and this step starts from it.
         """
         finished = lane.poll()
         adopted = finished is not None and self._adopt(finished, problems)
         keywords = self._warm.keywords(method, self.bodies.previous_labels(obs.win_ids), n)
-        common = {'intrinsics': obs.intrinsics, 'image_size': obs.image_size,
-                  'seed': int(self.params['seed']), 'method': method.name}
         if not lane.busy and self._warm.full_solve_due():
             # a search or a full solve, from the running fit as it is now
             lane.submit(SolveJob(dataclasses.replace(obs, gray=None),
