@@ -81,6 +81,9 @@ class FrameResult:
         True when the frame was not processed at all (duplicate stamp): nothing to publish.
     carried : (M,) bool
         True where the label was carried over from an earlier window, not given by this solve.
+    from_running_fit : bool
+        True when the frame was answered from the running fit (:meth:`.Pipeline.carry`)
+        instead of a solve: every label carried, no body valid.
     rays : (M, 3) float32
         Viewing ray through every segment's midpoint at unit depth ``(x, y, 1)``, camera optical
         frame, from the undistorted segment and the intrinsics of this frame (the camera's, the
@@ -106,6 +109,7 @@ class FrameResult:
     n_tracks: int = 0
     skipped: bool = False
     carried: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    from_running_fit: bool = False
     rays: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.float32))
 
     @property

@@ -58,7 +58,7 @@ and waits: the solver gets a core of its own instead of half the interpreter. Th
 steps the window from the running fit (20-100 ms) and runs the searches and full solves
 the method asks for in one more child, a solver lane (:mod:`mlofc_ros.lane`), whose answer
 becomes the running fit when it comes back; a frame it cannot step is answered from the
-running fit (below). Of the frames
+running fit as below (counted ``unsolved``, not processed). Of the frames
 tracked while the solver was busy it solves the newest next; the others (``unsolved`` in
 ``stats``, counted as dropped) are answered from the running fit (:meth:`Pipeline.carry`):
 their ``~/segments`` cloud gives each segment the body its track had at the last solve (NaN
@@ -200,7 +200,8 @@ class MlofcNode(Node):
         self.problem_hold = PROBLEM_HOLD
         #: frame counters: received = processed (solved and published) + dropped + skipped +
         #: errors; dropped counts the queue's drops and the ``unsolved`` frames (tracked, then
-        #: replaced by a newer one before the solver was free); ``carried``: clouds from the
+        #: replaced by a newer one before the solver was free, or answered by the solver from
+        #: the running fit); ``carried``: clouds from the
         #: running fit (Pipeline.carry) of unsolved frames and of frames still being solved
         #: when a newer one was answered; ``late``: processed frames whose own cloud was not
         #: published (newer frames were answered first). One cloud per processed frame, less
@@ -603,6 +604,16 @@ class MlofcNode(Node):
             self._warn('pipeline', result.problem)
         self.last_result = result           # before publishing: a subscriber may look at it
         self._log_focal(result)
+        if result.from_running_fit:
+            # the solver answered from the running fit (a step that did not hold while a full
+            # solve runs beside it): not processed but unsolved, its cloud a carried one
+            with self._lock:
+                self.stats['dropped'] += 1
+                self.stats['unsolved'] += 1
+            if self._publish_cloud(header, obs, result):
+                self._count('carried')
+            self._publish(header, obs.gray, result, debug)    # no body valid: no twist
+            return
         if not self._publish_cloud(header, obs, result):
             self._count('late')
         self._publish(header, obs.gray, result, debug)

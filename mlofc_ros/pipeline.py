@@ -599,7 +599,7 @@ class Pipeline:
             window_fill=obs.window_fill, problem=None, focal_length=focal,
             focal_log_sigma=focal_log_sigma,
             frame_interval=obs.frame_interval, n_tracks=int(len(obs.win_ids)), rays=rays,
-            skipped=obs.skipped, **fields)
+            skipped=obs.skipped, from_running_fit=not obs.skipped, **fields)
 
     def solve_state(self) -> SolveState:
         """

@@ -70,6 +70,9 @@ def _serve(conn: Connection) -> None:
         params, lane = conn.recv()
     except (EOFError, OSError):
         return
+    if params is None:                  # a lane's child: it only runs jobs
+        _serve_requests(conn, None)
+        return
     pipeline = Pipeline(**params)
     if lane:
         # the full solves of a stepping method in a lane of their own: the frames step
@@ -84,8 +87,12 @@ def _serve(conn: Connection) -> None:
             pipeline.lane.close()                       # its job is not wanted any more
 
 
-def _serve_requests(conn: Connection, pipeline: 'Pipeline') -> None:
-    """Child: answer the requests on ``conn`` with ``pipeline`` until told to stop or it closes."""
+def _serve_requests(conn: Connection, pipeline: Optional['Pipeline']) -> None:
+    """
+    Child: answer the requests on ``conn`` until told to stop or it closes.
+
+    ``pipeline`` solves and is reconfigured; None in a lane's child, which only runs jobs.
+    """
     from mlofc_ros.lane import run_job
     while True:
         try:
@@ -95,10 +102,12 @@ def _serve_requests(conn: Connection, pipeline: 'Pipeline') -> None:
         if request == 'stop':
             return
         try:
-            if request == 'solve':
-                reply: Any = (pipeline.solve(payload), pipeline.solve_state())
-            elif request == 'job':
-                reply = run_job(payload)        # a lane's: its exception is its answer
+            if request == 'job':
+                reply: Any = run_job(payload)   # a lane's: its exception is its answer
+            elif pipeline is None:
+                raise ValueError(f'a lane runs jobs only, not {request!r}')
+            elif request == 'solve':
+                reply = (pipeline.solve(payload), pipeline.solve_state())
             elif request == 'reconfigure':
                 pipeline.reconfigure(**payload)
                 reply = None
@@ -114,10 +123,12 @@ def _serve_requests(conn: Connection, pipeline: 'Pipeline') -> None:
             return                                      # the parent went while we solved
 
 
-def _spawn(params: Mapping[str, Any], lane: bool, group: bool = True
+def _spawn(params: Optional[Mapping[str, Any]], lane: bool, group: bool = True
            ) -> Tuple[subprocess.Popen, Connection]:
     """
     Start a child that serves a pipeline made with ``params``; its process and our end.
+
+    ``params`` None: a lane's child, which runs jobs only (no pipeline).
 
     ``lane``: the child's pipeline runs its full solves in a :class:`ProcessLane`; ``group``:
     the child in a process group of its own.
@@ -135,7 +146,7 @@ def _spawn(params: Mapping[str, Any], lane: bool, group: bool = True
             pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
             process_group=0 if group else None)
     conn = Connection(ours.detach())
-    conn.send((dict(params), lane))
+    conn.send((None if params is None else dict(params), lane))
     return process, conn
 
 
@@ -277,7 +288,7 @@ class ProcessLane:
         if self._process is not None and self._process.poll() is not None:
             self.close()                                # it ended while idle
         if self._process is None:
-            self._process, self._conn = _spawn({}, lane=False, group=False)
+            self._process, self._conn = _spawn(None, lane=False, group=False)
 
     def submit(self, job: 'SolveJob') -> None:
         """Send ``job`` to the child (started if need be); returns at once."""

@@ -304,6 +304,7 @@ def test_carry_answers_an_unsolved_frame_from_the_last_solve():
     np.testing.assert_array_equal(r.carried, expect >= 0)
     assert np.all(np.isnan(r.residuals)) and not r.body_valid.any()
     assert r.stamp == obs.stamp and r.segments is obs.segments and not r.solved
+    assert r.from_running_fit and not solved.from_running_fit
     assert r.rays.shape == (len(obs.segments), 3) and np.all(np.isfinite(r.rays))
     # carrying changes nothing: the frame is still solved as if it had not been carried
     assert p.solve(obs).stamp == obs.stamp
@@ -901,8 +902,9 @@ def test_a_lane_runs_the_full_solves_while_the_frames_step():
     assert all('init_motions' in job.keywords for job in jobs[1:])   # full solves
     # until the search is back the frames are answered from the running fit; then they step
     waiting = results[first:first + 5]
-    assert all(not r.body_valid.any() for r in waiting)
+    assert all(not r.body_valid.any() and r.from_running_fit for r in waiting)
     stepped = [r for r in results[first + 5:] if r.body_valid.all()]
+    assert not any(r.from_running_fit for r in stepped)
     assert len(stepped) >= 18
     for r in results[-3:]:
         assert np.mean(r.labels >= 0) >= 0.9

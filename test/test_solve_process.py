@@ -168,6 +168,7 @@ def test_a_child_steps_the_frames_while_its_lane_runs_the_full_solves():
     waiting = [r for r in results[4:] if not r.body_valid.any()]
     stepped = [r for r in results[4:] if r.body_valid.all()]
     assert waiting and len(stepped) >= 20
+    assert all(r.from_running_fit for r in waiting)      # the flag crosses the process
     for r in stepped[-3:]:
         for s in range(2):
             g = int(np.bincount(truth[r.labels == s]).argmax())
@@ -204,6 +205,9 @@ def test_a_lane_answers_a_job_as_the_solver_and_restarts_when_killed():
         finished = _answer(lane)
         assert finished is not None and finished[0] is job and not lane.busy
         np.testing.assert_array_equal(finished[1].labels, segment_lines(**keywords).labels)
+        # its child runs jobs only: it has no pipeline to solve frames with
+        lane._conn.send(('solve', obs))
+        assert lane._conn.recv() == ('error', "ValueError: a lane runs jobs only, not 'solve'")
         # a job that fails comes back with its exception
         lane.submit(SolveJob(obs, dict(keywords, n_bodies=-1), 0))
         finished = _answer(lane)
