@@ -101,6 +101,36 @@ def test_a_change_of_count_needs_a_better_score():
     assert count.last_change == 'search' and calls[-1] == 0
 
 
+def test_a_reported_noise_below_the_costs_scale_does_not_hide_a_body():
+    # 'general' on real video reports the noise of its fitted-direction fits, far below the
+    # scale of its costs: at that level every track is above the outlier bound, whatever
+    # the count. The score then takes the costs' own scale (their median chi-square).
+    tracks = np.zeros((100, 5, 4))                    # 8 equations a track
+    dof = np.full(100, 8.0)
+    truth = np.repeat([0, 1], [60, 40])
+    rng = np.random.default_rng(0)
+    fit = rng.chisquare(8, 100)                       # noise 1 px under the right body
+
+    def result(labels, n, sigma_px):
+        costs = np.where(truth[:, None] == np.arange(n), fit[:, None], 100.0 + fit[:, None])
+        return replace(_result(labels, np.zeros((n, 3))), costs=costs,
+                       diagnostics=Diagnostics(sigma_px=sigma_px))
+    one = result(np.zeros(100, dtype=int), 1, 0.2)
+    # at 0.2 px every track would be loose, at the costs' own scale only the second body's
+    assert np.array_equal(birth_candidate(one, dof), truth)
+
+    def solve(n, labels, bodies):
+        return one if n <= 1 else result(truth, 2, 0.2)
+    count = BodyCount(birth_every=1)
+    count.solve(tracks, None, solve)
+    assert count.n == 1
+    count.solve(tracks, np.zeros(100, dtype=int), solve)
+    assert count.n == 2 and count.last_change == 'birth'
+    # a reported noise on the costs' scale is kept: a track 100 above it is loose
+    fine = result(np.zeros(100, dtype=int), 1, 1.0)
+    assert np.array_equal(birth_candidate(fine, dof), truth)
+
+
 def test_a_body_below_the_smallest_size_is_tried_at_once():
     """Its object left the view: one less is tried at the next solve, not every 2nd one."""
     calls: List[int] = []
@@ -218,3 +248,27 @@ def test_bench_count_reports_a_stream(tmp_path):
     count.plot([run], [], tmp_path / 'counts.png')
     assert (tmp_path / 'counts.png').stat().st_size > 1000
     assert count.parse_args(['--quick']).seed_list == [0]
+
+
+def test_bench_count_scores_the_moving_segments_apart_from_the_still_scene():
+    from types import SimpleNamespace
+    seg = np.array([[0, 0, 0, 50], [20, 0, 20, 50], [40, 0, 40, 50], [60, 0, 60, 50],
+                    [80, 0, 80, 50], [100, 0, 100, 50], [120, 0, 120, 50]], dtype=float)
+    ids = np.arange(7)
+    before = SimpleNamespace(track_ids=ids, segments=seg, labels=np.zeros(7, dtype=int))
+    moved = seg + np.array([0, 0, 0, 0, 5, 5, 5])[:, None] * [1, 0, 1, 0]   # 5 px sideways
+    # four still segments on body 0 (the still scene's), the moving three: two on body 1
+    after = SimpleNamespace(track_ids=ids, segments=moved, labels=np.array([0, 0, 0, 0, 1, 1, 0]))
+    results = {0: before, count.LAG: after}
+    assert count.moving_apart(results, (count.LAG, count.LAG + 1)) == pytest.approx(2 / 3)
+    assert np.isnan(count.moving_apart(results, (0, 1)))        # no frame LAG before it
+
+
+def test_bench_count_tables_hopkins_per_method():
+    rec = {'n': 2, 'count': [2, 2, 1], 'auto': [0.1, 0.2, 0.3], 'known': [0.1] * 3,
+           'auto_ms': [1.0] * 8, 'known_ms': [1.0] * 8}
+    text = count.hopkins_table([dict(rec, method='general'), dict(rec, method='robust')])
+    rows = [line for line in text.splitlines() if line.startswith('| ') and 'motions' not in line]
+    assert rows[0].startswith('| robust | 2 | 1 | 67 | 20.0 | 10.0 | 2.00 |')
+    assert rows[1].startswith('| general | 2 |')
+    assert count.parse_args(['--hopkins-methods', '']).hopkins_method_list == []
