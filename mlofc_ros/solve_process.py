@@ -28,7 +28,8 @@ environment) in a process group of its own, talking over a socket pair: it ends 
 when the parent's end closes (the parent ended, however). Its full solves (a search: 1-2 s) run
 in one more child of its own, a solver lane (:class:`ProcessLane`, :mod:`mlofc_ros.lane`),
 while it steps the frames from the running fit (20-100 ms each): a live node at 30 Hz solved
-15-57% of the frames when the full solves ran in turn, 68-84% with the lane (bench live).
+15-57% of the frames when the full solves ran in turn, 32-70% with the lane (bench live;
+the others answered from the running fit).
 
 Example::
 

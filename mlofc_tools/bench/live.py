@@ -28,7 +28,8 @@ the id switches), on the answered frames from the window's ``window``-th frame o
 frame :data:`SETTLED_FRAME` on (3 s: past the first search and the full solves after it at
 30 Hz). Also reported:
 the frames the node answered (``~/segments``), the frames it tracked but did not solve (the
-solver was busy; the node counts them as dropped, ``unsolved``), those of them it answered
+solver was busy, or its solver process had no step to take while its lane ran a full solve;
+the node counts them as dropped, ``unsolved``), those of them it answered
 from the running fit (each segment labelled as its track was at the last solve,
 ``carried``; scored like the solved ones, without angular velocities; ``wrong % of the solved
 frames`` leaves them out) and the frames its queue dropped before tracking.
