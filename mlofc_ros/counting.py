@@ -271,8 +271,8 @@ def _noise(res: SegmentationResult, dof: np.ndarray) -> Optional[float]:
     alike and none can win; and every track is "unexplained", so that one more body would
     take them all. ``'general'`` reports the noise of its fitted-direction fits, 2-4x below
     the costs it labels with on real video (rubik_cube: one body where its trial of two was
-    1.5-2x cheaper); on the rendered streams it is the noise drawn, and is kept (the costs'
-    median scale, taken always, let a fifth body win there: bench count's stream 95 -> 88%
+    1.5-2x cheaper); on the rendered streams it is the noise drawn, and is kept (the larger
+    of the two, taken always, let a fifth body win there: bench count's stream 95 -> 88%
     right).
     """
     told = _reported_noise(res)

@@ -201,9 +201,8 @@ def hopkins_table(records: Sequence[Dict[str, Any]]) -> str:
                                for c, v in enumerate(found) if v)])
     return common.markdown_table(
         ['method', 'motions', 'sequences', 'right count % of the frames',
-         'misclassified % (count '
-         'unknown)', 'misclassified % (count known)', 'ratio', 'CPU mean ratio',
-         'counts found (share of frames)'], rows)
+         'misclassified % (count unknown)', 'misclassified % (count known)', 'ratio',
+         'CPU mean ratio', 'counts found (share of frames)'], rows)
 
 
 def real_run(frames: Sequence[np.ndarray], camera: Any, method: str, num_bodies: int
