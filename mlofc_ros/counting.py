@@ -123,7 +123,8 @@ def _without(labels: np.ndarray, gone: int, into: int) -> np.ndarray:
     return np.where(out > gone, out - 1, out)
 
 
-def birth_candidate(res: SegmentationResult, dof: np.ndarray) -> Optional[np.ndarray]:
+def birth_candidate(res: SegmentationResult, dof: np.ndarray,
+                    sigma: Optional[float] = None) -> Optional[np.ndarray]:
     """
     Return the labels of the count one more worth a try (the unexplained tracks as body n).
 
@@ -133,10 +134,12 @@ def birth_candidate(res: SegmentationResult, dof: np.ndarray) -> Optional[np.nda
     the background: bench count's scheduled stream, 0-6 of 240 tracks labelled -1 with one
     body for four, yet a BIC far better with four). None when fewer usable tracks than
     :func:`min_body_lines` are unexplained or the count is at
-    :data:`~mlofc_ros.solver.model_selection.MAX_BODIES`.
+    :data:`~mlofc_ros.solver.model_selection.MAX_BODIES`. ``sigma``: that noise level (px)
+    if already known (:func:`_noise` of ``res``).
     """
     labels = np.asarray(res.labels)
-    loose = ((labels < 0) | unexplained(res, _noise(res, dof), dof)) & (dof > 0)
+    sigma = _noise(res, dof) if sigma is None else sigma
+    loose = ((labels < 0) | unexplained(res, sigma, dof)) & (dof > 0)
     if res.n_bodies >= MAX_BODIES or int(loose.sum()) < min_body_lines(dof):
         return None
     return np.where(loose, res.n_bodies, labels)
@@ -226,7 +229,7 @@ class BodyCount:
                 return trial
         self._since_birth += 1
         self._since_search += 1
-        born = (birth_candidate(res, dof) if self._since_birth >= self.birth_every
+        born = (birth_candidate(res, dof, sigma) if self._since_birth >= self.birth_every
                 and (settled or self._last != 'merge') else None)
         if born is None:
             return res
