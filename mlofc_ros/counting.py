@@ -33,7 +33,7 @@ body more or one less scores better:
 Both compare the BIC of :func:`~mlofc_ros.solver.model_selection.bic_score` at one noise level,
 the richer model's (so that the poorer cannot hide behind a larger noise; the level the
 method reports, or its costs' own scale where most tracks would be outliers at that level:
-:func:`_noise`), a change must
+:func:`score_noise`), a change must
 win by :data:`SCORE_MARGIN`, and for :data:`HOLD` solves after a change the count does not go
 back (no flicker between two counts that score alike). A trial costs a warm solve, a search
 10-30 of them: on the scheduled stream of ``bench count`` the automatic count costs 0.9-1.4x
@@ -135,10 +135,10 @@ def birth_candidate(res: SegmentationResult, dof: np.ndarray,
     body for four, yet a BIC far better with four). None when fewer usable tracks than
     :func:`min_body_lines` are unexplained or the count is at
     :data:`~mlofc_ros.solver.model_selection.MAX_BODIES`. ``sigma``: that noise level (px)
-    if already known (:func:`_noise` of ``res``).
+    if already known (:func:`score_noise` of ``res``).
     """
     labels = np.asarray(res.labels)
-    sigma = _noise(res, dof) if sigma is None else sigma
+    sigma = score_noise(res, dof) if sigma is None else sigma
     loose = ((labels < 0) | unexplained(res, sigma, dof)) & (dof > 0)
     if res.n_bodies >= MAX_BODIES or int(loose.sum()) < min_body_lines(dof):
         return None
@@ -207,7 +207,7 @@ class BodyCount:
         dof = track_dof(tracks)
         current = list(range(self.n))
         res = solve(self.n, np.asarray(previous), current)
-        sigma = _noise(res, dof)
+        sigma = score_noise(res, dof)
         self._since_merge += 1
         self._since_change += 1
         settled = self._since_change >= HOLD
@@ -247,7 +247,7 @@ class BodyCount:
             if trial is None:
                 continue
             counts = np.bincount(trial.labels[trial.labels >= 0], minlength=trial.n_bodies)
-            richer = _noise(trial, dof)
+            richer = score_noise(trial, dof)
             if (trial.n_bodies == self.n + 1 and np.all(counts >= min_body_lines(dof))
                     and bic_score(trial, richer, dof) < bic_score(res, richer, dof)
                     - SCORE_MARGIN):
@@ -264,7 +264,7 @@ class BodyCount:
         return res
 
 
-def _noise(res: SegmentationResult, dof: np.ndarray) -> Optional[float]:
+def score_noise(res: SegmentationResult, dof: np.ndarray) -> Optional[float]:
     """
     Return the noise level (px) a count is scored at, from a result; None when unknown.
 

@@ -24,7 +24,7 @@ from mlofc_ros.solver.model_selection import min_body_lines
 from mlofc_ros.solver.result import Diagnostics, SegmentationResult
 from mlofc_ros.solver.warm import WarmStarts
 from mlofc_tools.bench import count
-from mlofc_tools.synthetic import scheduled_scene
+from mlofc_tools.synthetic import make_scene, scheduled_scene
 import numpy as np
 import pytest
 
@@ -269,6 +269,24 @@ def test_bench_count_tables_hopkins_per_method():
            'auto_ms': [1.0] * 8, 'known_ms': [1.0] * 8}
     text = count.hopkins_table([dict(rec, method='general'), dict(rec, method='robust')])
     rows = [line for line in text.splitlines() if line.startswith('| ') and 'motions' not in line]
-    assert rows[0].startswith('| robust | 2 | 1 | 67 | 20.0 | 10.0 | 2.00 |')
+    assert rows[0].startswith('| robust | 2 | 1 | 67 | - | 20.0 | 10.0 | 2.00 |')
     assert rows[1].startswith('| general | 2 |')
+    # single windows: kept in one of four, one less taken in two, one more in one
+    rec['windows'] = [(False, False), (True, False), (True, False), (False, True)]
+    text = count.hopkins_table([dict(rec, method='robust')])
+    assert '| robust | 2 | 1 | 67 | 25 (50 / 25) | 20.0 |' in text
     assert count.parse_args(['--hopkins-methods', '']).hopkins_method_list == []
+
+
+def test_bench_count_checks_the_score_alone_on_single_windows():
+    """Two distinct rotations keep their count; one rotation split in two loses a body."""
+    sc = make_scene(2, 30, n_frames=count.HOPKINS_K + 2, noise_px=0.5, image_size=(640, 480),
+                    focal_length=550.0, rotation_deg=(1.0, 2.0), seed=4)
+    size = (640.0, 480.0)
+    windows = count.score_preference(sc.tracks, sc.labels, 2, size, 'robust', 0)
+    assert len(windows) == count.SCORED_WINDOWS and not any(map(any, windows)), windows
+    one = make_scene(1, 60, n_frames=count.HOPKINS_K + 2, noise_px=0.5, image_size=(640, 480),
+                     focal_length=550.0, rotation_deg=(1.0, 2.0), seed=4)
+    split = np.arange(60) % 2                       # no motion tells these halves apart
+    windows = count.score_preference(one.tracks, split, 2, size, 'robust', 0)
+    assert windows and all(fewer for fewer, _ in windows), windows
