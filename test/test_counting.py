@@ -17,7 +17,7 @@ from typing import List
 
 from mlofc_ros.bodies import BodyTracker
 from mlofc_ros.counting import (birth_candidate, BodyCount, compact_labels, merge_candidate,
-                                MERGE_CHI2)
+                                MERGE_CHI2, split_pair)
 from mlofc_ros.pipeline import Pipeline
 from mlofc_ros.solver import get_method
 from mlofc_ros.solver.model_selection import min_body_lines
@@ -129,6 +129,37 @@ def test_a_reported_noise_below_the_costs_scale_does_not_hide_a_body():
     # a reported noise on the costs' scale is kept: a track 100 above it is loose
     fine = result(np.zeros(100, dtype=int), 1, 1.0)
     assert np.array_equal(birth_candidate(fine, dof), truth)
+
+
+def test_a_birth_that_splits_one_motion_in_two_is_refused():
+    """Two bodies that explain each other's tracks are one motion, whatever the score says."""
+    tracks = np.zeros((100, 5, 4))                    # 8 equations a track
+    dof = np.full(100, 8.0)
+    labels = np.repeat([0, 1], [80, 20])
+
+    def result(labels, costs):
+        n = costs.shape[1]
+        return replace(_result(labels, np.zeros((n, 3))), costs=costs,
+                       diagnostics=Diagnostics(sigma_px=1.0))
+    # one body: 20 tracks left unlabelled at 5 px^2, well within the outlier bound at 1 px
+    one = result(np.where(labels == 1, -1, 0), np.where(labels == 1, 5.0, 1.0)[:, None])
+
+    def trial(other):
+        # each track costs 1 under its own body, `other` under the other one
+        return result(labels, np.where(labels[:, None] == [0, 1], 1.0, other))
+    split, apart = trial(5.0), trial(1e3)
+    assert split_pair(split, 1.0, dof) == (0, 1) and split_pair(apart, 1.0, dof) is None
+    # 19 of the 20 explained by body 0 (95%), 72 of the 80 by body 1 (90%: not more)
+    mostly = split.costs.copy()
+    mostly[80, 0] = mostly[:8, 1] = 1e3
+    assert split_pair(replace(split, costs=mostly), 1.0, dof) is None
+    for other, n in ((5.0, 1), (1e3, 2)):
+        count = BodyCount(birth_every=1)
+        count.solve(tracks, None, lambda n, labels, bodies: one)
+        # the split scores far better (a smaller residual for one more body) yet is refused
+        count.solve(tracks, np.where(labels == 1, -1, 0),
+                    lambda n, labels, bodies, t=trial(other): t if n == 2 else one)
+        assert count.n == n, other
 
 
 def test_a_body_below_the_smallest_size_is_tried_at_once():

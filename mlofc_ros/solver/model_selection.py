@@ -71,21 +71,33 @@ def _capped_costs(res: SegmentationResult, sigma: Optional[float], dof: np.ndarr
     return best, chi2_quantile(OUTLIER_P, dof[usable]) * sigma ** 2
 
 
+def explained(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) -> np.ndarray:
+    """
+    Return which body explains which track ``(N, n)`` bool: its cost within the outlier bound.
+
+    The bound of :func:`bic_score` at noise ``sigma`` (px; None: the model's own estimate);
+    a cost a body has none for (NaN) and an unusable track explain nothing.
+    """
+    costs = np.asarray(res.costs, dtype=float)
+    out = np.zeros(costs.shape, dtype=bool)
+    usable = dof > 0
+    if np.any(usable):
+        _, cap = _capped_costs(res, sigma, dof)
+        out[usable] = costs[usable] <= cap[:, None]
+    return out
+
+
 def unexplained(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray
                 ) -> np.ndarray:
     """
     Return the tracks ``(N,)`` bool that :func:`bic_score` counts at their outlier bound.
 
     Usable tracks whose cheapest cost at noise ``sigma`` (px; None: the model's own estimate)
-    is above the bound, whatever their label: a model whose segmentation runs at an inflated
-    noise level (``'general'``) keeps such tracks labelled, yet they are what one more body
-    would explain.
+    is above the bound, whatever their label (no body :func:`explained` them): a model whose
+    segmentation runs at an inflated noise level (``'general'``) keeps such tracks labelled,
+    yet they are what one more body would explain.
     """
-    out = np.zeros(len(dof), dtype=bool)
-    if np.any(dof > 0):
-        best, cap = _capped_costs(res, sigma, dof)
-        out[dof > 0] = best > cap
-    return out
+    return (dof > 0) & ~explained(res, sigma, dof).any(axis=1)
 
 
 def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) -> float:
