@@ -28,7 +28,8 @@ body more or one less scores better:
   tracks are left unexplained to make a body (labelled -1, or above the score's outlier
   bound: :func:`birth_candidate`), those tracks as the new one; then, every
   :data:`SEARCH_EVERY` to :data:`MAX_SEARCH_WAIT` solves or when more tracks come loose, with
-  those tracks unlabelled for the solver's search.
+  those tracks unlabelled for the solver's search; a trial that leaves two bodies explaining
+  each other's tracks is one motion split in two and is refused (:func:`split_pair`).
 
 Both compare the BIC of :func:`~mlofc_ros.solver.model_selection.bic_score` at one noise level,
 the richer model's (so that the poorer cannot hide behind a larger noise; the level the
