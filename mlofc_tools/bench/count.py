@@ -42,8 +42,8 @@ per solver method (``--methods``; ``window`` 5 for ``robust``, the node's defaul
   1.25x the known-count misclassification). Beside it, the score alone
   (:func:`score_preference`): on three windows per sequence, how often the true count,
   solved from the true labels, holds against one body less and one more solved from
-  scratch, compared as the online count compares them; what no online logic can beat with
-  this score.
+  scratch, compared as the online count compares them: what an online count deciding by
+  this score can hope for.
 - **real**: ``visp_cube`` (still until frame 38, then the sheet with the cube and the
   cylinder dragged by a hand: one body while still, two while it moves), ``rubik_cube`` (the
   cube turning on a turntable: two) and ``hamburg_taxi`` (three vehicles and the
@@ -206,7 +206,7 @@ def score_preference(tracks: np.ndarray, truth: np.ndarray, n: int,
     the richer model's noise level (:func:`~mlofc_ros.counting.score_noise`), a change must
     win by ``SCORE_MARGIN``, a new body needs ``min_body_lines`` tracks. Per window
     ``(fewer, more)``: one body less, one more would be taken. Neither: the score, given the
-    true segmentation, keeps the true count; no online logic can do better than that.
+    true segmentation, keeps the true count.
     """
     out = []
     for t in np.unique(np.linspace(HOPKINS_K - 1, tracks.shape[1] - 1, SCORED_WINDOWS)
@@ -226,7 +226,7 @@ def score_preference(tracks: np.ndarray, truth: np.ndarray, n: int,
             sizes = np.bincount(more.labels[more.labels >= 0], minlength=n + 1)
             more_ok = bool(np.all(sizes >= min_body_lines(dof)))
         except ValueError:
-            more, more_ok = None, False
+            more_ok = False
         sigma = score_noise(true, dof)
         took_fewer = bic_score(fewer, sigma, dof) < bic_score(true, sigma, dof) - SCORE_MARGIN
         took_more = False
