@@ -58,17 +58,22 @@ def _capped_costs(res: SegmentationResult, sigma: Optional[float], dof: np.ndarr
     Both ``(N_usable,)``, px^2; a track no body has a cost for is ``inf``. ``sigma`` None: the
     model's own robust noise estimate.
     """
-    usable = dof > 0
     # a track no body has a cost for (all NaN, e.g. degenerate for the general model) is not
     # explained: +inf, capped at the outlier bound like any unexplained track
-    costs = res.costs[usable]
+    costs = res.costs[dof > 0]
     best = (np.where(np.isnan(costs), np.inf, costs).min(axis=1) if costs.shape[1]
             else np.full(len(costs), np.inf))
+    return best, _outlier_bound(res, sigma, dof)
+
+
+def _outlier_bound(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray
+                   ) -> np.ndarray:
+    """Return every usable track's outlier bound ``(N_usable,)`` px^2 at noise ``sigma``."""
     if sigma is None:
         sigma = noise_sigma(res.costs, res.labels, dof)
         sigma = sigma if np.isfinite(sigma) else 1.0
         sigma = max(sigma, 1e-9)
-    return best, chi2_quantile(OUTLIER_P, dof[usable]) * sigma ** 2
+    return chi2_quantile(OUTLIER_P, dof[dof > 0]) * sigma ** 2
 
 
 def explained(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) -> np.ndarray:
@@ -82,8 +87,7 @@ def explained(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) 
     out = np.zeros(costs.shape, dtype=bool)
     usable = dof > 0
     if np.any(usable):
-        _, cap = _capped_costs(res, sigma, dof)
-        out[usable] = costs[usable] <= cap[:, None]
+        out[usable] = costs[usable] <= _outlier_bound(res, sigma, dof)[:, None]
     return out
 
 

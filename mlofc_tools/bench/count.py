@@ -73,7 +73,8 @@ from mlofc_ros.solver.model_selection import bic_score, min_body_lines, track_do
 from mlofc_tools.bench import common
 from mlofc_tools.bench.hopkins_runs import LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX
 from mlofc_tools.bench.pipeline import read_real_sequence, REAL_DIR
-from mlofc_tools.bench.real import LAG, render_strip, STILL_PX, track_motion, track_table
+from mlofc_tools.bench.real import (LAG, MOVING_PX, render_strip, STILL_PX, track_motion,
+                                    track_table)
 from mlofc_tools.datasets import hopkins as hk
 from mlofc_tools.scoring import misclassification, misclassification_any
 from mlofc_tools.synthetic import scheduled_scene
@@ -98,9 +99,6 @@ SCORED_WINDOWS = 3
 #: by :func:`moving_apart`; not rubik_cube, whose turntable turns with the cube, its round
 #: edges still in the image).
 MOVING_FRAMES = {'visp_cube': (48, 80), 'hamburg_taxi': (10, 40)}
-#: A segment that moved more than this over :data:`~mlofc_tools.bench.real.LAG` frames is
-#: moving (bench real's default), px.
-MOVING_PX = 2.0
 #: Real sequences: name -> (known count, frames shown in the picture).
 REAL = {'visp_cube': (2, (30, 50, 70)), 'rubik_cube': (2, (8, 14, 20)),
         'hamburg_taxi': (4, (12, 24, 36))}
@@ -209,13 +207,13 @@ def score_preference(tracks: np.ndarray, truth: np.ndarray, n: int,
     true segmentation, keeps the true count.
     """
     out = []
+    kw: Dict[str, Any] = {'image_size': image_size, 'method': method, 'seed': seed}
     for t in np.unique(np.linspace(HOPKINS_K - 1, tracks.shape[1] - 1, SCORED_WINDOWS)
                        .astype(int)):
         win = tracks[:, t - HOPKINS_K + 1:t + 1]
         seen = np.all(np.isfinite(win[..., 0]), axis=1)
         win, labels = win[seen], np.unique(truth[seen], return_inverse=True)[1]
         dof = track_dof(win)
-        kw: Dict[str, Any] = {'image_size': image_size, 'method': method, 'seed': seed}
         try:
             true = segment_lines(win, n, init_labels=labels, **kw)
             fewer = segment_lines(win, n - 1, **kw)
@@ -310,12 +308,12 @@ def moving_apart(results: Dict[int, FrameResult], frames: Tuple[int, int]) -> fl
     """
     Return the share of the moving segments on a body apart from the still scene's (mean).
 
-    Over the frames ``[first, end)``: a segment that moved more than :data:`MOVING_PX` over
-    :data:`~mlofc_tools.bench.real.LAG` frames (bench real's motion proxy) counts when it is
-    labelled and its body is not the one holding most of the still segments (those that
-    moved less than :data:`~mlofc_tools.bench.real.STILL_PX`). Whatever the count, a moving
-    thing held by the background's body is what a robot would miss. NaN without moving
-    segments.
+    Over the frames ``[first, end)``: a segment that moved more than
+    :data:`~mlofc_tools.bench.real.MOVING_PX` over :data:`~mlofc_tools.bench.real.LAG` frames
+    (bench real's motion proxy) counts when it is labelled and its body is not the one
+    holding most of the still segments (those that moved less than
+    :data:`~mlofc_tools.bench.real.STILL_PX`). Whatever the count, a moving thing held by the
+    background's body is what a robot would miss. NaN without moving segments.
     """
     shares = []
     for f in range(*frames):

@@ -73,6 +73,9 @@ MOTION_START = 38
 LAG = 5
 #: A segment whose track moved less than this (px) over :data:`LAG` frames is still.
 STILL_PX = 0.5
+#: A segment whose track moved more than this (px) over :data:`LAG` frames is moving
+#: (``--moving-px``).
+MOVING_PX = 2.0
 #: A moving-phase frame is right when at least this share of its moving segments is on the
 #: moving body ...
 GOAL_SEGMENTS = 0.9
@@ -421,7 +424,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                    help=f'real sequences (default {REAL_DIR}); scores {SEQUENCE}/')
     common.add_methods_option(p, 'robust,general')
     p.add_argument('--window', type=int, default=10, help='window length, frames (10)')
-    p.add_argument('--moving-px', type=float, default=2.0,
+    p.add_argument('--moving-px', type=float, default=MOVING_PX,
                    help=f'a segment moving more than this over {LAG} frames is moving (2.0)')
     p.add_argument('--proxy', choices=list(PROXIES), default='normal',
                    help='motion proxy of the headline tables (normal)')
