@@ -87,7 +87,7 @@ from mlofc_ros import params as P
 from mlofc_ros.camera import CameraModel
 from mlofc_ros.image import image_msg_to_gray
 from mlofc_ros.messages.debug import draw_debug
-from mlofc_ros.pipeline import FrameResult, Observation, Pipeline
+from mlofc_ros.pipeline import FrameResult, Observation, Pipeline, window_frames
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
                                     segments_msg, stamp_to_seconds, twist_msg)
 from mlofc_ros.solve_process import SolveProcess, SolverProcessEnded
@@ -255,7 +255,7 @@ class MlofcNode(Node):
         self._solver.start()
         self.get_logger().info(
             f'listening on {self.resolve_topic_name("image")} with '
-            f'num_bodies={values["num_bodies"]}, window={values["window"]}, '
+            f'num_bodies={values["num_bodies"]}, window={window_frames(values)}, '
             f'method={values["method"]}')
 
     # --- parameters ----------------------------------------------------------------------
@@ -373,7 +373,7 @@ class MlofcNode(Node):
         now = time.monotonic()
         with self._lock:
             stats, problem, frame_id = dict(self.stats), self._problem, self._frame_id
-            window = self._values['window']
+            window = window_frames(self._values)
         last_t, last_n = self._diag_last
         self._diag_last = (now, stats['processed'])
         rate = (stats['processed'] - last_n) / max(now - last_t, 1e-9)

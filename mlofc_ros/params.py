@@ -25,7 +25,7 @@ Example::
 
     >>> from mlofc_ros import params
     >>> params.validate('window', 1)
-    'window must be in [2, 30], got 1'
+    "window must be 0 (the method's own) or in [2, 30], got 1"
     >>> params.coerce('focal_length', 500)
     500.0
 """
@@ -99,10 +99,11 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               '(a new body gets an id no body held in the last minute, one that stops the '
               "background's).",
               range=(0, 8)),
-    ParamSpec('window', int, 5,
+    ParamSpec('window', int, 0,
               'Sliding window length in frames; the solver runs on the last `window` frames at '
-              'every frame.',
-              range=(2, 30)),
+              "every frame. 0 = the method's own: 10 for general (a translation needs them), "
+              '5 for the others.',
+              range=(0, 30)),
     ParamSpec('method', str, 'robust',
               'Solver method (one of mlofc_ros.solver.METHODS).'),
     ParamSpec('min_segment_length', float, 20.0,
@@ -247,6 +248,8 @@ def validate(name: str, value: Any) -> Optional[str]:
         lo, hi = spec.range
         if not lo <= value <= hi:
             return f'{name} must be in [{lo}, {hi}], got {value!r}'
+    if name == 'window' and value == 1:       # a window of one frame observes no motion
+        return f"window must be 0 (the method's own) or in [2, {hi}], got 1"
     return None
 
 

@@ -90,6 +90,16 @@ def make_tracker(params: Mapping[str, Any]) -> LineTracker:
     return LineTracker(TrackerConfig.from_params(params))
 
 
+def window_frames(params: Mapping[str, Any]) -> int:
+    """
+    Return the sliding window's length (frames) that ``params`` ask for.
+
+    ``params['window']``, or when it is 0 the window of ``params['method']``
+    (:attr:`.Method.window`: 10 for 'general', 5 for the others).
+    """
+    return int(params['window']) or get_method(params['method']).window
+
+
 class Pipeline:
     """
     Sliding-window motion segmentation of a gray image stream.
@@ -111,8 +121,8 @@ class Pipeline:
         self.params.update(_params.check_all(kwargs))
         self.bodies = BodyTracker()
         self._tracker = make_tracker(self.params)
-        self._window = TrackWindow(self.params['window'])
-        self._stamps: Deque[float] = deque(maxlen=self.params['window'])
+        self._window = TrackWindow(window_frames(self.params))
+        self._stamps: Deque[float] = deque(maxlen=self._window.size)
         self._intervals: Deque[float] = deque(maxlen=2 * _params.PARAMS['window'].range[1])
         self._last_stamp: Optional[float] = None
         self._image_size: Optional[Tuple[int, int]] = None
@@ -178,9 +188,9 @@ class Pipeline:
         else:
             # detection settings, not state: the tracks carry on
             self._tracker.reconfigure(TrackerConfig.from_params(self.params))
-        if 'window' in changed:
-            self._window = TrackWindow(self.params['window'])
-            self._stamps = deque(maxlen=self.params['window'])
+        if window_frames(self.params) != self._window.size:    # `window`, or the method's own
+            self._window = TrackWindow(window_frames(self.params))
+            self._stamps = deque(maxlen=self._window.size)
         if 'num_bodies' in changed:
             self._reset_bodies()
         if changed & {'num_bodies', 'min_segment_length'}:
@@ -236,6 +246,11 @@ class Pipeline:
     def window_fill(self) -> int:
         """Frames currently in the window."""
         return len(self._stamps)
+
+    @property
+    def window_size(self) -> int:
+        """Frames the window holds when full: ``window``, or the method's own when it is 0."""
+        return self._window.size
 
     @property
     def n_bodies(self) -> int:
@@ -680,7 +695,7 @@ class Pipeline:
             return None
         n_req = int(self.params['num_bodies'])
         method = get_method(self.params['method']).for_window(obs.window_fill,
-                                                              int(self.params['window']))
+                                                              self._window.size)
 
         # the solver's keywords for this window, warm starts aside
         common = {'intrinsics': obs.intrinsics, 'image_size': obs.image_size,
@@ -881,7 +896,7 @@ class Pipeline:
                     self._focal_now = (self._focal.focal, self._focal.log_sigma)
             return
         span = (obs.window_fill - 0.5) * obs.frame_interval
-        if (self._focal is None or obs.window_fill < int(self.params['window'])
+        if (self._focal is None or obs.window_fill < self._window.size
                 or res.diagnostics.translation_scales is None
                 or not obs.stamp - self._focal_evidence_stamp >= span):
             return

@@ -330,6 +330,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         from mlofc_ros import params as mlofc_params
         from mlofc_ros.bag.bagfile import write_image_bag
+        from mlofc_ros.pipeline import window_frames
         from mlofc_tools.render import render_sequence
 
         out_dir = common.results_dir('demo', args.out)
@@ -350,7 +351,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                             overwrite=args.keep_bag)
             print(f'wrote {bag_path if args.keep_bag else "the bag"} (mcap)', flush=True)
             collected = run_node(bag_path, cfg, work)
-        window = cfg.window or int(mlofc_params.PARAMS['window'].default)
+        method = {'method': cfg.method} if cfg.method else {}
+        window = cfg.window or window_frames(dict(mlofc_params.defaults(), **method))
         warmup = min(window, cfg.frames - 1)
         ev = evaluate(seq, collected, warmup)
         lines = summary_lines(seq, ev, collected, cfg)

@@ -126,7 +126,7 @@ def test_mlofc_bag_user_errors_exit_cleanly(tmp_path, capsys):
 
     write_image_bag(tmp_path / 'in', _frames(2), [0.0, 0.1], CAMERA)
     assert bag_main([str(tmp_path / 'in'), str(tmp_path / 'out'), '-p', 'window:=1']) == 2
-    assert 'window must be in' in capsys.readouterr().err
+    assert "window must be 0 (the method's own) or in [2, 30]" in capsys.readouterr().err
     assert bag_main([str(tmp_path / 'in'), str(tmp_path / 'out'),
                      '--image-topic', '/camera/camera_info']) == 1
     assert 'not sensor_msgs/msg/Image' in capsys.readouterr().err

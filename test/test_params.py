@@ -21,7 +21,7 @@ from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import METHODS
 import pytest
 
-REQUIRED = {'num_bodies': (int, 2), 'window': (int, 5), 'method': (str, 'robust'),
+REQUIRED = {'num_bodies': (int, 2), 'window': (int, 0), 'method': (str, 'robust'),
             'min_segment_length': (float, 20.0), 'focal_length': (float, 0.0),
             'publish_debug_image': (bool, False), 'max_pixels': (int, 4096 * 4096),
             'queue_size': (int, 2), 'max_frame_gap': (float, None)}
@@ -33,7 +33,7 @@ def test_table_has_the_required_parameters_with_their_types_and_defaults():
         assert spec.type is kind, name
         if default is not None:
             assert spec.default == default and type(spec.default) is kind, name
-    assert params.PARAMS['window'].range == (2, 30)
+    assert params.PARAMS['window'].range == (0, 30)
     assert len(params.PARAMS) == len(params.PARAMETERS)
 
 
@@ -56,7 +56,8 @@ def test_method_choices_come_from_the_solver():
 
 
 @pytest.mark.parametrize('name, value, words', [
-    ('window', 1, ['window', '[2, 30]', '1']),
+    ('window', 1, ['window', '0', '[2, 30]', '1']),
+    ('window', -1, ['window', '[0, 30]']),
     ('window', 31, ['window', '31']),
     ('window', 5.0, ['integer']),
     ('num_bodies', True, ['integer', 'bool']),
@@ -84,14 +85,14 @@ def test_integers_are_accepted_for_doubles_and_coerced():
     v = params.coerce('focal_length', 500)
     assert v == 500.0 and isinstance(v, float)
     with pytest.raises(ValueError, match='window'):
-        params.coerce('window', 0)
+        params.coerce('window', 1)
 
 
 def test_check_all_reports_every_problem_at_once():
     got = params.check_all({'window': 7, 'focal_length': 3})
     assert got == {'window': 7, 'focal_length': 3.0}
     with pytest.raises(ValueError) as err:
-        params.check_all({'window': 0, 'queue_size': 0})
+        params.check_all({'window': 1, 'queue_size': 0})
     assert 'window' in str(err.value) and 'queue_size' in str(err.value)
 
 
@@ -99,7 +100,7 @@ def test_scopes_and_defaults():
     node_only = set(params.names('node'))
     assert {'queue_size', 'publish_debug_image'} <= node_only
     assert not node_only & set(params.names('pipeline'))
-    assert params.defaults()['window'] == 5
+    assert params.defaults()['window'] == 0
     assert set(params.defaults('pipeline')) == set(params.names('pipeline'))
 
 

@@ -449,6 +449,30 @@ def test_constructor_and_reconfigure_validate_like_the_node():
     assert r.window_fill == 3 and ids & set(r.track_ids.tolist())
 
 
+def test_window_zero_takes_the_methods_own_and_follows_the_method():
+    # `window` 0 (the default): 'general' needs 10 frames to tell a translation from a turn
+    # about an axis in the image plane, the other methods keep 5; a length given wins
+    from mlofc_ros.pipeline import window_frames
+    from mlofc_ros.solver import get_method
+    assert Pipeline().params['window'] == 0
+    assert window_frames({'window': 0, 'method': 'robust'}) == 5
+    assert window_frames({'window': 0, 'method': 'general'}) == get_method('general').window == 10
+    assert window_frames({'window': 7, 'method': 'general'}) == 7
+    seq = small_sequence(14)
+    p = Pipeline(num_bodies=2, focal_length=300.0)
+    fills = [p.process(g, t, seq.camera).window_fill for g, t in zip(seq.frames[:7], seq.stamps)]
+    assert fills == [1, 2, 3, 4, 5, 5, 5] and p.window_size == 5
+    p.reconfigure(method='general')            # its own window: restarted at 10 frames
+    assert p.window_fill == 0 and p.window_size == 10
+    fills = [p.process(g, t, seq.camera).window_fill
+             for g, t in zip(seq.frames[7:], seq.stamps[7:])]
+    assert fills == [1, 2, 3, 4, 5, 6, 7]
+    p.reconfigure(window=10)                   # the same length: the window goes on
+    assert p.window_fill == 7
+    p.reconfigure(method='robust')             # the length given holds for every method
+    assert p.window_fill == 7
+
+
 def test_distorted_camera_is_undistorted_before_solving():
     seq = render_sequence(n_boxes=1, n_frames=4, size=(320, 240), seed=1,
                           distortion=(-0.25, 0.08, 0.0, 0.0, 0.0))
@@ -791,7 +815,7 @@ def test_line_tracks_give_what_the_images_give_through_the_same_tracker():
         np.testing.assert_array_equal(a.labels, b.labels)
         np.testing.assert_array_equal(a.angular_velocities, b.angular_velocities)
         np.testing.assert_array_equal(a.residuals, b.residuals)
-    assert b.solved and b.window_fill == lines.params['window']
+    assert b.solved and b.window_fill == lines.window_size == 5
 
 
 def test_line_tracks_of_a_synthetic_stream_are_segmented_with_stable_ids():

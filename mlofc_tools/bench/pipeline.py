@@ -472,13 +472,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     import cv2
     cv2.setNumThreads(1)
     from mlofc_ros import params
+    from mlofc_ros.pipeline import window_frames
 
     t0 = time.monotonic()
     common.eprint('pipeline: rendering', ', '.join(f'{w}x{h}' for w, h in args.wh))
     seqs = rendered_sequences(args.wh, args.frames, args.boxes, args.seed)
     if args.real_frames > 0 and args.real_dir:
         seqs += real_sequences(args.real_dir, args.real_frames)
-    skip = int(params.PARAMS['window'].default)
+    skip = window_frames(dict(params.defaults(), **args.params))
     res = {}
     for s in seqs:
         common.eprint(f'pipeline: {s.name} ({len(s.frames)} frames)')

@@ -124,14 +124,14 @@ def run_setting(item: Tuple[Setting, int, Sequence[int], int]) -> Dict[str, obje
 
     from mlofc_ros import params as _params
     from mlofc_tools.bench import pipeline as bench_pipeline
-    from mlofc_ros.pipeline import make_tracker
+    from mlofc_ros.pipeline import make_tracker, window_frames
 
     setting, frames, seeds, timing_frames = item
     cv2.setNumThreads(1)
     params = dict(_params.defaults(), **params_of(setting))
     seq, tracking = _sequences(frames, tuple(seeds), timing_frames)
     run = bench_pipeline.run_sequence(seq, params_of(setting))
-    skip = int(params['window'])
+    skip = window_frames(params)
     cpu, lsd = run['total_cpu'][skip:], run['lsd_cpu'][skip:]
     scores = []
     for _label, rendered in tracking:
