@@ -454,6 +454,9 @@ def test_queue_drops_are_counted_and_diagnostics_report_at_1hz(harness):
     assert h.wait(lambda: statuses(diag, name)[-1].level == DiagnosticStatus.OK, 6.0)
     kv = {v.key: v.value for v in statuses(diag, name)[-1].values}
     assert 'unsupported' in kv['last problem'] and float(kv['rate (Hz)']) == 0.0
+    # the window in use: `window` 0 (the default) is the method's own, 10 frames for general
+    assert h.set_params(method='general')[0].successful
+    assert h.wait(lambda: last()['window fill'].endswith('/10'), 5.0), last()
 
 
 # --- scenes the model cannot explain ----------------------------------------------------------
