@@ -68,7 +68,7 @@ import zlib
 import cv2
 from mlofc_ros.counting import SCORE_MARGIN, score_noise
 from mlofc_ros.pipeline import FrameResult, Pipeline
-from mlofc_ros.solver import segment_lines
+from mlofc_ros.solver import get_method, segment_lines
 from mlofc_ros.solver.model_selection import bic_score, min_body_lines, track_dof
 from mlofc_tools.bench import common
 from mlofc_tools.bench.hopkins_runs import LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX
@@ -89,8 +89,6 @@ FRAMES = 60
 CHANGES = [0, 16, 31, 45]
 #: Frames after a change before the count is scored.
 SETTLE = 10
-#: Window per method (the node's default for ``robust``, the recommended one for ``general``).
-WINDOWS = {'robust': 5, 'general': 10}
 #: Frames per window of the Hopkins155 streams (``bench hopkins_stream``'s K).
 HOPKINS_K = 5
 #: Single windows per Hopkins155 sequence on which the count's score is checked alone.
@@ -116,7 +114,7 @@ def stream_run(seed: int, method: str, num_bodies: int = 0) -> Dict[str, Any]:
     ``ids``: per frame ``{true body: published id held by most of its lines}`` (-1 none).
     """
     sc = scheduled_scene(SCHEDULE, FRAMES, seed=seed, rotation_deg=(0.2, 0.4))
-    p = Pipeline(num_bodies=num_bodies, window=WINDOWS.get(method, 5), method=method)
+    p = Pipeline(num_bodies=num_bodies, method=method)       # the method's own window
     track_ids = np.arange(len(sc.tracks))
     out: Dict[str, Any] = {'count': [], 'want': [], 'ids': [], 'ms': []}
     for k in range(FRAMES):
@@ -266,7 +264,7 @@ def hopkins_table(records: Sequence[Dict[str, Any]]) -> str:
 def real_run(frames: Sequence[np.ndarray], camera: Any, method: str, num_bodies: int
              ) -> Dict[str, Any]:
     """Run a real sequence; per frame the count and CPU ms, and the results by frame."""
-    p = Pipeline(num_bodies=num_bodies, window=WINDOWS.get(method, 5), method=method)
+    p = Pipeline(num_bodies=num_bodies, method=method)       # the method's own window
     out: Dict[str, Any] = {'count': [], 'ms': [], 'results': {}}
     for k, gray in enumerate(frames):
         t = time.thread_time()
@@ -338,8 +336,9 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], streams: List[Di
     """Return the Markdown report."""
     head = common.run_header(
         'Number of bodies found online', common.command_line('count', argv),
-        {'Pipeline': '`num_bodies=0` against the count given; `window` ' + ', '.join(
-            f'{w} ({m})' for m, w in WINDOWS.items()) + f'; stamps at {FPS:g} frames/s',
+        {'Pipeline': "`num_bodies=0` against the count given; the method's own `window`, "
+                     + ', '.join(f'{get_method(m).window} ({m})' for m in args.method_list)
+                     + f'; stamps at {FPS:g} frames/s',
          'Threads': 'single (`cv2.setNumThreads(1)`); CPU ratios within the same run',
          'Run time': f'{seconds:.0f} s'}, revision)
     rows = []
@@ -464,7 +463,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     streams, reals = [], []
     sequences = {name: read_real_sequence(os.path.join(args.real_dir, name)) for name in REAL}
     for method in args.method_list:
-        window = WINDOWS.get(method, 5)
+        window = get_method(method).window
         for seed in args.seed_list:
             common.eprint(f'count: scheduled, {method}, seed {seed}')
             run = stream_run(seed, method)
