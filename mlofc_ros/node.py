@@ -610,6 +610,8 @@ class MlofcNode(Node):
             with self._lock:
                 self.stats['dropped'] += 1
                 self.stats['unsolved'] += 1
+            if not self._values['carry_labels']:
+                return                                            # solved frames only
             if self._publish_cloud(header, obs, result):
                 self._count('carried')
             self._publish(header, obs.gray, result, debug)    # no body valid: no twist

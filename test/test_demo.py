@@ -43,10 +43,12 @@ def test_match_bodies_maximises_overlap():
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_demo_runs_the_node_as_a_subprocess(tmp_path):
+@pytest.mark.parametrize('method', [[], ['--method', 'general']])
+def test_demo_runs_the_node_as_a_subprocess(tmp_path, method):
+    # a slow method too: fed in lock-step, it solves every frame (its motions in the table)
     proc = subprocess.run(
-        [sys.executable, '-m', 'mlofc_tools.demo', '--frames', '20', '--out', str(tmp_path)],
-        capture_output=True, text=True, timeout=150)
+        [sys.executable, '-m', 'mlofc_tools.demo', '--frames', '20', '--out', str(tmp_path)]
+        + method, capture_output=True, text=True, timeout=150)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     out = proc.stdout
     assert 'node: 20/20 frames answered' in out, out
@@ -70,6 +72,13 @@ def test_demo_fails_cleanly_when_the_node_does_not_answer(tmp_path, monkeypatch,
     assert rc == 1
     assert 'did not come up' in err and 'Traceback' not in err
     assert not (tmp_path / 'README.md').exists()
+
+
+def test_demo_solves_a_slow_method_in_the_nodes_own_thread():
+    general = demo_node._node_command_line(demo_node.DemoConfig(method='general'))
+    assert 'method:=general' in general and 'solver_process:=false' in general
+    assert not any('solver_process' in a for a in demo_node._node_command_line(
+        demo_node.DemoConfig()))
 
 
 def test_demo_uses_the_domain_the_environment_sets(monkeypatch):

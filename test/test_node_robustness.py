@@ -544,6 +544,28 @@ def test_a_body_with_too_few_tracks_gets_no_twist(monkeypatch):
 # --- where the solver runs ---------------------------------------------------------------------
 
 
+def test_carry_labels_false_publishes_no_answer_from_the_running_fit(harness):
+    # the solver's own answers from the running fit (a step that does not hold while a full
+    # solve runs in the lane) are carried frames too: carry_labels:=false publishes none
+    seq = small_sequence()
+    h = harness('/rob_nocarry', focal_length=300.0, warn_period=0.0, carry_labels=False)
+    for k in range(3):
+        h.frame(image_msg(seq.frames[k], seq.stamps[k]))
+    pipe = h.mlofc._pipeline
+    solve, pipe.solve = pipe.solve, pipe.carry          # the solver answers from the fit
+    n, unsolved = len(h.clouds), h.mlofc.stats['unsolved']
+    h.deliver(image_msg(seq.frames[3], seq.stamps[3]))
+    assert h.wait(lambda: h.mlofc.stats['unsolved'] > unsolved, 10.0)
+    assert h.mlofc.pending_frames() == 0 and len(h.clouds) == n
+    assert h.set_params(carry_labels=True)[0].successful
+    cloud = h.frame(image_msg(seq.frames[4], seq.stamps[4]))     # carried, published
+    assert np.sum(parse_segments_msg(cloud)[2] >= 0) > 10
+    assert h.mlofc.stats['carried'] == 1
+    pipe.solve = solve
+    h.frame(image_msg(seq.frames[5], seq.stamps[5]))
+    h.accounting()
+
+
 def test_a_slow_method_solves_in_a_child_process_and_moves_back_on_a_method_change(harness):
     seq = small_sequence(12)
     h = harness('/rob_proc', method='general', window=5, focal_length=300.0, warn_period=0.0)
