@@ -15,7 +15,9 @@
 ``python -m mlofc_tools.demo`` (``make demo``): the node, end to end, on a rendered bag.
 
 1. Render boxes rotating about the camera centre in front of a static striped wall (2 boxes +
-   background = 3 bodies, 640x480, 60 frames at 30 Hz, known angular velocities and edges).
+   background = 3 bodies, 640x480, 60 frames at 30 Hz, known angular velocities and edges);
+   ``--motion own_centre``: boxes spinning about their own centres, which also translate
+   relative to the camera (for ``--method general``).
 2. Write them as a rosbag2 (mcap) with ``sensor_msgs/Image`` mono8 and ``CameraInfo``.
 3. Start ``mlofc_node`` as a separate process on the run's ``ROS_DOMAIN_ID``, play the bag into it
    over DDS with :mod:`mlofc_ros.bag.player` (lock-step: the next frame goes out when the node
@@ -43,6 +45,12 @@ from mlofc_tools.bench import common
 from mlofc_tools.demo_node import (Collected, DemoConfig, DemoError, FrameOutput,  # noqa: F401
                                    IMAGE_TOPIC, INFO_TOPIC, run_node)
 import numpy as np
+
+#: How the boxes may move (:func:`mlofc_tools.render.render_sequence`'s ``motion``), as the
+#: report says it.
+MOTIONS = {'camera_centre': 'rotating about the camera centre',
+           'own_centre': 'spinning about their own centres (so translating relative to the '
+                         'camera too)'}
 
 #: A detected segment matches a true edge when both its endpoints lie within this many pixels
 #: of the edge (point-to-segment distance).
@@ -261,7 +269,7 @@ def write_report(out: Optional[str], lines: Sequence[str], cfg: DemoConfig,
     node_cmd = ' '.join(Path(collected.node_command[0]).name if i == 0 else a
                         for i, a in enumerate(collected.node_command))
     head = common.run_header('Demo: mlofc_node on a rendered bag', cmd, {
-        'Scene': f'{cfg.boxes} striped boxes rotating about the camera centre in front of a '
+        'Scene': f'{cfg.boxes} striped boxes {MOTIONS[cfg.motion]} in front of a '
                  f'static striped wall = {cfg.num_bodies} bodies; {cfg.size[0]}x{cfg.size[1]} '
                  f'px, {cfg.frames} frames at {cfg.fps:g} Hz, noise sigma {cfg.noise:g} grey '
                  f'levels, seed {cfg.seed}',
@@ -302,6 +310,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--boxes', type=int, default=2, help='moving boxes, 1..4 (default 2)')
     p.add_argument('--size', type=_size, default=(640, 480), help='WxH (default 640x480)')
     p.add_argument('--seed', type=int, default=0, help='scene and noise seed (default 0)')
+    p.add_argument('--motion', choices=list(MOTIONS), default='camera_centre',
+                   help='how the boxes move (default camera_centre: the paper\'s rotation '
+                        'about the camera; own_centre: spinning in place, so translating too)')
     p.add_argument('--method', help='solver method (node parameter; default: its default)')
     p.add_argument('--window', type=int, help='window length (node parameter)')
     p.add_argument('--out', default=None,
@@ -324,7 +335,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print('demo: --frames must be >= 3', file=sys.stderr)
         return 2
     cfg = DemoConfig(frames=args.frames, boxes=args.boxes, size=args.size, seed=args.seed,
-                     method=args.method, window=args.window, frame_timeout=args.frame_timeout,
+                     motion=args.motion, method=args.method, window=args.window, frame_timeout=args.frame_timeout,
                      startup_timeout=args.startup_timeout, domain_id=args.domain_id)
     t_start = time.monotonic()
     try:
@@ -338,7 +349,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
               '+ background) ...', flush=True)
         try:
             seq = render_sequence(n_boxes=cfg.boxes, n_frames=cfg.frames, size=cfg.size,
-                                  motion='camera_centre', background=True,
+                                  motion=cfg.motion, background=True,
                                   noise_sigma=cfg.noise, fps=cfg.fps, seed=cfg.seed)
         except ValueError as exc:  # a bad --boxes/--size, named by the renderer
             print(f'demo: error: {exc}', file=sys.stderr)

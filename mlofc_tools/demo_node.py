@@ -57,6 +57,7 @@ class DemoConfig:
     fps: float = 30.0
     noise: float = 2.0
     seed: int = 0
+    motion: str = 'camera_centre'
     method: Optional[str] = None
     window: Optional[int] = None
     frame_timeout: float = 30.0

@@ -74,6 +74,12 @@ def test_demo_fails_cleanly_when_the_node_does_not_answer(tmp_path, monkeypatch,
     assert not (tmp_path / 'README.md').exists()
 
 
+def test_demo_renders_boxes_that_translate_on_request():
+    assert demo._parser().parse_args([]).motion == 'camera_centre'
+    assert demo._parser().parse_args(['--motion', 'own_centre']).motion == 'own_centre'
+    assert set(demo.MOTIONS) == {'camera_centre', 'own_centre'}
+
+
 def test_demo_solves_a_slow_method_in_the_nodes_own_thread():
     general = demo_node._node_command_line(demo_node.DemoConfig(method='general'))
     assert 'method:=general' in general and 'solver_process:=false' in general
