@@ -311,7 +311,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--size', type=_size, default=(640, 480), help='WxH (default 640x480)')
     p.add_argument('--seed', type=int, default=0, help='scene and noise seed (default 0)')
     p.add_argument('--motion', choices=list(MOTIONS), default='camera_centre',
-                   help='how the boxes move (default camera_centre: the paper\'s rotation '
+                   help="how the boxes move (default camera_centre: the paper's rotation "
                         'about the camera; own_centre: spinning in place, so translating too)')
     p.add_argument('--method', help='solver method (node parameter; default: its default)')
     p.add_argument('--window', type=int, help='window length (node parameter)')
@@ -335,8 +335,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print('demo: --frames must be >= 3', file=sys.stderr)
         return 2
     cfg = DemoConfig(frames=args.frames, boxes=args.boxes, size=args.size, seed=args.seed,
-                     motion=args.motion, method=args.method, window=args.window, frame_timeout=args.frame_timeout,
-                     startup_timeout=args.startup_timeout, domain_id=args.domain_id)
+                     motion=args.motion, method=args.method, window=args.window,
+                     frame_timeout=args.frame_timeout, startup_timeout=args.startup_timeout,
+                     domain_id=args.domain_id)
     t_start = time.monotonic()
     try:
         from mlofc_ros import params as mlofc_params
