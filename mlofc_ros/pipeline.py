@@ -188,9 +188,10 @@ class Pipeline:
         else:
             # detection settings, not state: the tracks carry on
             self._tracker.reconfigure(TrackerConfig.from_params(self.params))
-        if window_frames(self.params) != self._window.size:    # `window`, or the method's own
-            self._window = TrackWindow(window_frames(self.params))
-            self._stamps = deque(maxlen=self._window.size)
+        size = window_frames(self.params)               # `window`, or the method's own
+        if size != self._window.size:
+            self._window = TrackWindow(size)
+            self._stamps = deque(maxlen=size)
         if 'num_bodies' in changed:
             self._reset_bodies()
         if changed & {'num_bodies', 'min_segment_length'}:

@@ -19,8 +19,8 @@ per real sequence to ``docs/results/count/``.
 
 Every stream goes through ``mlofc_ros.pipeline.Pipeline`` frame by frame (stamps at 30
 frames/s) with ``num_bodies=0`` (:mod:`mlofc_ros.counting`) and again with the count given,
-per solver method (``--methods``; ``window`` 5 for ``robust``, the node's default, 10 for
-``general``):
+per solver method (``--methods``; each in its own window, :attr:`.Method.window`: 5 for
+``robust``, 10 for ``general``):
 
 - **scheduled** (:func:`mlofc_tools.synthetic.scheduled_scene`, seeds 0-5): line tracks of a
   still background (120 lines) and three boxes of 40 lines rotating about the camera centre
