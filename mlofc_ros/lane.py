@@ -14,12 +14,14 @@
 """
 A solver lane: the full solves of a stream, run while the frames go on stepping.
 
-A method that steps (``general``) answers most frames with a tracking step of 20-100 ms, but
+A method that steps (``general``) answers most frames with a tracking step of about 20 ms, but
 its schedule (:mod:`mlofc_ros.solver.warm`) asks for a search (1-2 s) at the start and full
-solves (0.3-0.8 s) after it and whenever the steps no longer explain the window. A
+solves (0.3-0.8 s) after it and whenever the steps no longer explain the window, and every few
+steps for a rescan of one body (a step of about 90 ms). A
 :class:`~mlofc_ros.pipeline.Pipeline` given a lane (:meth:`Pipeline.use_lane`) hands those to
 the lane instead and steps the frames meanwhile from the running fit; when the lane's answer
-comes back it becomes the running fit, and the next frame steps from it. The node's solver
+comes back it becomes the running fit (a rescan's: the body's motion, when it moved to another
+basin), and the next frame steps from it. The node's solver
 process does so (:class:`mlofc_ros.solve_process.ProcessLane`: one more child process);
 :class:`InlineLane` runs the job at once and hands it back a given number of frames later
 (tests, offline replays).
@@ -43,12 +45,15 @@ class SolveJob:
     ``keywords``: those of :func:`~mlofc_ros.solver.segment_lines` (tracks, bodies, method,
     warm start); ``obs``: the observation it solves (without its image), which the answer
     is published for; ``generation``: the pipeline's solve state it started from (a job
-    from before a reset or a reconfiguration is dropped).
+    from before a reset or a reconfiguration is dropped). ``rescan``: a step that rescans a
+    body instead (its frame was answered by a step without it; the answer is the body's
+    motion, not published).
     """
 
     obs: Observation
     keywords: Dict[str, Any]
     generation: int
+    rescan: bool = False
 
 
 #: What :meth:`poll` returns: the job and its result, or the exception it raised.

@@ -45,7 +45,7 @@ from mlofc_ros.frame import (centred_intrinsics, check_image_size, check_lines, 
 from mlofc_ros.lane import Finished, SolveJob
 from mlofc_ros.solver import get_method, Method, segment_lines, SegmentationResult, StepNotTaken
 from mlofc_ros.solver.focal import focal_evidence, FOCAL_PRIOR_LOG_SIGMA, FocalEstimate
-from mlofc_ros.solver.warm import WarmStarts
+from mlofc_ros.solver.warm import result_motions, WarmStarts
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_ros.tracks.undistort import undistort_segments
@@ -741,11 +741,13 @@ class Pipeline:
                           common: Dict[str, Any], problems: List[str]
                           ) -> Optional[SegmentationResult]:
         """
-        Step the window of ``obs``; hand a search or full solve that is due to ``lane``.
+        Step the window of ``obs``; hand a search, full solve or rescan that is due to ``lane``.
 
         ``common``: the solver's keywords for the window (camera, seed, method), warm starts
         aside. Returns the result (None: answer from the running fit). The lane's finished
-        job, if any, first becomes the running fit, and this step starts from it.
+        job, if any, first becomes the running fit (a rescan's: the rescanned body's motion,
+        when it found another basin), and this step starts from it. While a full solve asked
+        for by a step that did not hold is out, each step rescans a body in turn itself.
         """
         finished = lane.poll()
         adopted = finished is not None and self._adopt(finished, problems)
@@ -758,9 +760,25 @@ class Pipeline:
         if 'init_motions' not in keywords:
             self._from_running_fit = True         # nothing to step from before the first search
             return None
-        if not keywords.get('step'):              # meanwhile a step, without rescans
+        if not keywords.get('step'):              # meanwhile a step
             keywords = {k: v for k, v in keywords.items() if k != 'rescan'}
             keywords['step'] = True
+            if lane.busy and self._warm.full_next:
+                # the steps do not hold until the full solve is back: each rescans a body in
+                # turn, whose new basin holds meanwhile (replayed at 30 Hz, below)
+                keywords['rescan'] = self._warm.rescan_meanwhile(keywords['init_motions'][0])
+        elif 'rescan' in keywords:
+            # a rescan (a step of about 90 ms, 3-4 of them) to the lane when it is idle, this
+            # frame a plain step: at 30 Hz the steps alone keep up with the camera
+            keywords = dict(keywords)
+            rescan = keywords.pop('rescan')
+            handed = not lane.busy
+            if handed:
+                lane.submit(SolveJob(dataclasses.replace(obs, gray=None),
+                                     dict(common, tracks=obs.win_tracks, n_bodies=n,
+                                          step_only=True, rescan=rescan, **keywords),
+                                     self._generation, rescan=True))
+            self._warm.rescan_aside(handed)
         if adopted:
             # the answer's labels are of a window the stream has since left (by the solve's
             # duration), its motions still hold: every track is labelled afresh at them (kept,
@@ -771,8 +789,8 @@ class Pipeline:
             keywords['init_labels'] = np.full_like(keywords['init_labels'], -1)
         try:
             return segment_lines(obs.win_tracks, n, step_only=True, **common, **keywords)
-        except StepNotTaken:
-            self._warm.step_declined()            # the lane's full solve next
+        except StepNotTaken as exc:
+            self._warm.step_declined(exc.motions)     # the lane's full solve next
             self._from_running_fit = True
             return None
 
@@ -783,6 +801,16 @@ class Pipeline:
         Not an answer that failed (said in ``problems``) or that started before a reset.
         """
         job, result = finished
+        if job.rescan:
+            # the body's motion, when the rescan moved it (its frame was answered by a step)
+            motions = None
+            if job.generation == self._generation:
+                if isinstance(result, SegmentationResult):
+                    motions = result_motions(result)
+                elif isinstance(result, StepNotTaken):
+                    motions = result.motions
+            self._warm.rescan_returned(motions)
+            return False
         if job.generation != self._generation:
             return False
         if isinstance(result, Exception):

@@ -939,6 +939,74 @@ def test_a_lane_runs_the_full_solves_while_the_frames_step():
             assert np.linalg.norm(w - omegas[g]) < 0.05 * np.linalg.norm(omegas[g])
 
 
+def test_a_lane_takes_the_rescans_and_the_frames_step_without_them(monkeypatch):
+    # a rescan (a step of 3-4 steps' CPU) goes to the lane when it is idle; the frame steps
+    # without it, and the rescans still come in turn
+    import mlofc_ros.pipeline as pipeline_module
+    from mlofc_ros.lane import InlineLane
+    from scenes import random_scene
+    tracks, truth, omegas, intr = random_scene(2, 25, n_frames=40, noise=0.2, seed=3,
+                                               own_centre=True)
+    ids = np.arange(tracks.shape[0])
+    p = Pipeline(num_bodies=2, window=10, method='general')
+    lane = InlineLane(delay=2)
+    p.use_lane(lane)
+    jobs, asked = [], []
+    real_submit = lane.submit
+    lane.submit = lambda job: jobs.append(job) or real_submit(job)
+    real = pipeline_module.segment_lines
+    monkeypatch.setattr(pipeline_module, 'segment_lines',
+                        lambda *a, **k: asked.append((k, p._warm.full_next)) or real(*a, **k))
+    results = [p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+               for k in range(tracks.shape[1])]
+    rescans = [job for job in jobs if job.rescan]
+    assert len(rescans) >= 2
+    assert {job.keywords['rescan'][0] for job in rescans} == {0, 1}
+    assert all(job.keywords['step'] and job.keywords['step_only'] for job in rescans)
+    # the frames' own steps rescan only while a full solve is out after one did not hold
+    assert asked and all(due for k, due in asked if 'rescan' in k)
+    assert sum(r.body_valid.all() and not r.from_running_fit for r in results) >= 25
+    for r in results[-3:]:
+        for s in range(2):
+            g = int(np.bincount(truth[r.labels == s]).argmax())
+            assert np.count_nonzero((r.labels == s) & (truth != g)) <= 2
+            w = r.angular_velocities[s] / 30.0                  # rad/s to rad per frame
+            assert np.linalg.norm(w - omegas[g]) < 0.05 * np.linalg.norm(omegas[g])
+
+
+def test_while_a_full_solve_is_out_the_steps_rescan_a_body_in_turn(monkeypatch):
+    # steps that do not hold hand a full solve to the lane; until it is back each step rescans
+    # a body in turn (their motions come back with StepNotTaken)
+    import mlofc_ros.pipeline as pipeline_module
+    from mlofc_ros.lane import InlineLane
+    from mlofc_ros.solver import StepNotTaken
+    from mlofc_ros.solver.warm import result_motions
+    from scenes import random_scene
+    tracks, _, _, intr = random_scene(2, 25, n_frames=30, noise=0.2, seed=3, own_centre=True)
+    ids = np.arange(tracks.shape[0])
+    p = Pipeline(num_bodies=2, window=10, method='general')
+    lane = InlineLane(delay=6)
+    p.use_lane(lane)
+    steps = []
+    real = pipeline_module.segment_lines
+
+    def declining(*a, **k):
+        res = real(*a, **k)
+        steps.append(k)
+        if len(steps) >= 8 and len([s for s in steps if s.get('rescan')]) < 4:
+            raise StepNotTaken('a test', result_motions(res))
+        return res
+
+    monkeypatch.setattr(pipeline_module, 'segment_lines', declining)
+    results = [p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+               for k in range(tracks.shape[1])]
+    rescans = [s['rescan'] for s in steps if s.get('rescan')]
+    assert len(rescans) == 4 and all(len(r) == 1 for r in rescans)
+    assert [r[0] for r in rescans[1:]] == [(rescans[0][0] + k) % 2 for k in range(1, 4)]
+    assert all(r.from_running_fit for r in results[-25:] if not r.body_valid.all())
+    assert results[-1].body_valid.all() and not results[-1].from_running_fit
+
+
 @pytest.mark.parametrize('change', ['reconfigure', 'reset'])
 def test_a_lane_answer_started_before_a_reconfiguration_is_dropped(change, monkeypatch):
     import mlofc_ros.pipeline as pipeline_module

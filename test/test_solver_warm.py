@@ -89,18 +89,23 @@ def test_warm_inliers_sets_the_share_a_warm_start_keeps_without_a_search():
                           warm_inliers=bad)
 
 
-def _general_solve(warm, labels, n, start, w, sigma=0.5, stamp=float('nan')):
-    """Run ``warm``'s schedule through one solve of 'general' (motions ``w (n, 3)``)."""
-    from mlofc_ros.solver.methods import GENERAL
+def _result(labels, w, start='step', sigma=0.5):
+    """Return a 'general' result of bodies turning by ``w (n, 3)``, translation 0.02 along z."""
     from mlofc_ros.solver.result import Diagnostics, SegmentationResult
-    kw = warm.keywords(GENERAL, labels, n)
-    res = SegmentationResult(
+    n = len(w)
+    return SegmentationResult(
         labels=labels, angular_velocities=w, angular_covariances=np.stack([np.eye(3)] * n),
         focal_length=500.0, residuals=np.zeros(len(labels)), costs=np.zeros((len(labels), n)),
         method='general', segmentation_angular_velocities=np.array(w, dtype=float),
         translation_directions=np.tile([0.0, 0.0, 1.0], (n, 1)),
-        diagnostics=Diagnostics(start=start, sigma_px=sigma,
-                                translation_scales=np.full(n, 0.02)))
+        diagnostics=Diagnostics(start=start, sigma_px=sigma, translation_scales=np.full(n, 0.02)))
+
+
+def _general_solve(warm, labels, n, start, w, sigma=0.5, stamp=float('nan')):
+    """Run ``warm``'s schedule through one solve of 'general' (motions ``w (n, 3)``)."""
+    from mlofc_ros.solver.methods import GENERAL
+    kw = warm.keywords(GENERAL, labels, n)
+    res = _result(labels, w, start, sigma)
     warm.solved(GENERAL, res, stamp, 0.1)
     warm.remember(res, np.arange(n), np.ones(n, dtype=bool))
     return kw
@@ -200,3 +205,94 @@ def test_a_declined_step_asks_for_a_full_solve_and_made_no_rescan():
     warm.step_declined()
     assert warm.full_solve_due() and 'step' not in warm.keywords(GENERAL, labels, n)
     assert warm._rescanned is None
+
+
+def test_a_rescan_handed_to_a_lane_changes_its_body_only_when_it_moved_it():
+    # a solver lane takes the rescan out of a step: no other rescan is asked for until it is
+    # back; its answer moves the body's motion only when it found another basin, and counts
+    # for the back-off as a rescan in a step
+    from mlofc_ros.solver.methods import GENERAL
+    from mlofc_ros.solver.warm import (FULL_AFTER_SEARCH, RESCAN_EVERY, RESCAN_SWITCH,
+                                       result_motions, WarmStarts)
+    warm, labels, n = WarmStarts(), np.zeros(6, dtype=np.int64), 2
+    w = np.full((n, 3), 0.01)
+    _general_solve(warm, labels, n, 'spatial', w)
+    for _ in range(FULL_AFTER_SEARCH):
+        _general_solve(warm, labels, n, 'warm', w)
+
+    def due():
+        """Step until a step asks for a rescan; hand it to the lane; return its body."""
+        for _ in range(10 * RESCAN_EVERY):
+            kw = warm.keywords(GENERAL, labels, n)
+            if 'rescan' in kw:
+                warm.rescan_aside(True)
+                warm.solved(GENERAL, _result(labels, w))
+                warm.remember(_result(labels, w), np.arange(n), np.ones(n, dtype=bool))
+                return kw['rescan'][0]
+            _general_solve(warm, labels, n, 'step', w)
+        raise AssertionError('no rescan asked for')
+
+    body = due()
+    for _ in range(3 * RESCAN_EVERY):              # while it is out, plain steps
+        assert 'rescan' not in _general_solve(warm, labels, n, 'step', w)
+    # an answer within the basin: the stepped motion stays
+    near = w.copy()
+    near[body] *= 1.0 + 0.5 * RESCAN_SWITCH
+    assert not warm.rescan_returned(result_motions(_result(labels, near)))
+    np.testing.assert_array_equal(warm.motions[body][0], w[body])
+    # the next one, in another basin: the body takes the rescan's motion, T with its scale
+    body = due()
+    far = w.copy()
+    far[body] = [0.03, -0.01, 0.0]
+    assert warm.rescan_returned(result_motions(_result(labels, far)))
+    np.testing.assert_array_equal(warm.motions[body][0], far[body])
+    np.testing.assert_allclose(warm.motions[body][1], [0.0, 0.0, 0.02])
+    np.testing.assert_array_equal(warm.motions[1 - body][0], w[1 - body])
+    # the switch brought the rescans back to RESCAN_EVERY: steps in between, then the next
+    for _ in range(RESCAN_EVERY - 1):
+        assert 'rescan' not in _general_solve(warm, labels, n, 'step', w)
+    kw = warm.keywords(GENERAL, labels, n)
+    assert kw['rescan'] == [(body + 1) % n]
+    # one that did not hold (or was dropped) is asked for again at the next step
+    warm.rescan_aside(True)
+    warm.solved(GENERAL, _result(labels, w))
+    assert not warm.rescan_returned(None)
+    assert warm.keywords(GENERAL, labels, n)['rescan'] == [(body + 1) % n]
+    # a lane that was busy: the rescan stays due
+    warm.rescan_aside(False)
+    warm.solved(GENERAL, _result(labels, w))
+    assert warm.keywords(GENERAL, labels, n)['rescan'] == [(body + 1) % n]
+
+
+def test_a_rescan_in_a_step_that_did_not_hold_keeps_its_new_basin():
+    # while a full solve is out the steps do not hold and the running fit stays as it was;
+    # each rescans a body in turn, and a new basin one of them finds is kept meanwhile
+    from mlofc_ros.solver.methods import GENERAL
+    from mlofc_ros.solver.result import StepNotTaken
+    from mlofc_ros.solver.warm import FULL_AFTER_SEARCH, WarmStarts
+    import pickle
+    warm, labels, n = WarmStarts(), np.zeros(6, dtype=np.int64), 2
+    w = np.full((n, 3), 0.01)
+    _general_solve(warm, labels, n, 'spatial', w)
+    for _ in range(FULL_AFTER_SEARCH):
+        _general_solve(warm, labels, n, 'warm', w)
+    warm.keywords(GENERAL, labels, n)
+    warm.step_declined()
+    assert warm.full_solve_due()
+    W, T = warm.keywords(GENERAL, labels, n)['init_motions']
+    rescanned = []
+    for k in range(2):
+        body = warm.rescan_meanwhile(W)
+        rescanned += body
+        after = W.copy()
+        if k == 1:
+            after[body[0]] = [0.03, -0.01, 0.0]              # another basin
+        T_after = np.full((n, 3), 0.5)
+        exc = pickle.loads(pickle.dumps(StepNotTaken('declined', (after, T_after))))
+        np.testing.assert_array_equal(exc.motions[0], after)   # across the lane's process
+        warm.step_declined(exc.motions)
+    assert rescanned == [0, 1]                                # one body in turn
+    np.testing.assert_array_equal(warm.motions[0][0], W[0])   # within its basin: as it was
+    np.testing.assert_array_equal(warm.motions[1][0], [0.03, -0.01, 0.0])
+    np.testing.assert_array_equal(warm.motions[1][1], [0.5, 0.5, 0.5])
+    assert warm.full_solve_due()                              # still the full solve's

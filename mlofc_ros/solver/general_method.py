@@ -142,12 +142,12 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
         obs = LineObservations(problem.tracks, problem.intrinsics)
         given = Diagnostics(principal_point=(cx, cy), aspect=fy / fx,
                             image_size=problem.image_size)
-        stepped = _step(obs, given, fx, init_labels, init_motions,
-                        spatial_neighbours(obs.midpoints), rescan)
+        stepped, motions = _step(obs, given, fx, init_labels, init_motions,
+                                 spatial_neighbours(obs.midpoints), rescan)
         if stepped is not None:
             return stepped
         if step_only:
-            raise StepNotTaken('the tracked bodies no longer explain the window')
+            raise StepNotTaken('the tracked bodies no longer explain the window', motions)
     rot = solve_robust(problem, init_labels=init_labels, **ROTATION_STEP)
     if not enough:
         note = f'window has fewer than {MODEL_FRAMES} frames: rotation-only result'
@@ -158,11 +158,11 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
     neighbours = spatial_neighbours(obs.midpoints)
     tracked = None
     if stepping and problem.intrinsics is None:     # the focal length from the solve above
-        stepped = _step(obs, d, f, init_labels, init_motions, neighbours, rescan)
+        stepped, motions = _step(obs, d, f, init_labels, init_motions, neighbours, rescan)
         if stepped is not None:
             return stepped
-    if step_only and stepping:
-        raise StepNotTaken('the tracked bodies no longer explain the window')
+        if step_only:
+            raise StepNotTaken('the tracked bodies no longer explain the window', motions)
     if warm:
         tracked = _track(obs, rot, init_labels, init_motions, neighbours)
     if tracked is None:
@@ -226,9 +226,12 @@ def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarr
 def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
           init_labels: np.ndarray, init_motions: Tuple[np.ndarray, np.ndarray],
           neighbours: np.ndarray, rescan: Optional[np.ndarray] = None
-          ) -> Optional[SegmentationResult]:
+          ) -> Tuple[Optional[SegmentationResult], Optional[Tuple[np.ndarray, np.ndarray]]]:
     """
-    Advance the previous window's bodies by one frame; None when they no longer hold.
+    Advance the previous window's bodies by one frame; the result (None: they no longer hold).
+
+    Returned with the stepped motions ``(W, T)`` (None when it fitted none): those of a step
+    that did not hold go with :class:`.StepNotTaken`.
 
     ``diagnostics``, ``focal_length``: the camera's (the rotation-only solve's, or the given
     intrinsics'), which the result reports (:func:`_result`).
@@ -262,7 +265,7 @@ def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
     new = np.flatnonzero(~known)
     if (not np.any(known)
             or any(np.count_nonzero(usable & (prev == b)) < NEW_BODY_LINES for b in new)):
-        return None
+        return None, None
     n = w0.shape[0]
     nearest, sigma2 = assign_fitted(obs, w0[known], t0[known])
     assigned = np.where(nearest >= 0, np.flatnonzero(known)[nearest], -1)
@@ -295,13 +298,13 @@ def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
                                               neighbours=neighbours, points=obs.midpoints,
                                               position_weight=WARM_POSITION_WEIGHT)
     if not np.any(usable) or np.mean(labels[usable] >= 0) < WARM_INLIERS:
-        return None
+        return None, (W, T)
     held = usable & (prev >= 0) & (labels >= 0)
     if np.count_nonzero(held & (labels != prev)) > STEP_MOVES * max(np.count_nonzero(held), 1):
-        return None
+        return None, (W, T)
     sol = {'labels': labels, 'W': W, 'T': T, 'costs': costs, 'sigma2': NOISE_FACTOR * sigma2,
            'start': 'step', 'score': total_cost(total, labels, cap)}
-    return _result(obs, diagnostics, focal_length, sol, sigma2, 0, fitted[0])
+    return _result(obs, diagnostics, focal_length, sol, sigma2, 0, fitted[0]), (W, T)
 
 
 def _rescanned(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,

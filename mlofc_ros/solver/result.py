@@ -168,5 +168,16 @@ class StepNotTaken(Exception):
     A tracking step asked for alone (``step_only``) did not hold: no answer for this window.
 
     The caller runs the full solve elsewhere (the pipeline's solver lane,
-    :mod:`mlofc_ros.lane`) and answers the frame from its running fit.
+    :mod:`mlofc_ros.lane`) and answers the frame from its running fit. ``motions``: the
+    step's motions ``(W (n, 3), T (n, 3))`` after its LM steps and rescans (rad per frame, T
+    with its scale), None when it fitted none: a rescan's basin holds whatever the labels do.
     """
+
+    def __init__(self, message: str,
+                 motions: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> None:
+        super().__init__(message)
+        self.motions = motions
+
+    def __reduce__(self) -> Tuple[Any, ...]:
+        # the motions too across a process boundary (the lane's child)
+        return type(self), (str(self), self.motions)

@@ -19,7 +19,7 @@ tracker) and the motions of the last solve into the keywords of
 :func:`mlofc_ros.solver.segment_lines` for the method in use.
 """
 import math
-from typing import Any, Dict, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -78,6 +78,19 @@ RESCAN_SWITCH_FLOOR = 2e-3
 NOISE_JUMP = 2.0
 
 
+def result_motions(res: SegmentationResult) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return the motions ``(W (n, 3), T (n, 3))`` a result's labels were made with.
+
+    ``res``: a result of a method whose warm start is :attr:`WarmStart.MOTIONS`; T with its
+    scale (``translation_scales``, 1 when not given), rad per frame.
+    """
+    W = np.asarray(res.segmentation_angular_velocities, dtype=float).reshape(-1, 3)
+    scales = res.diagnostics.translation_scales
+    scales = np.ones(len(W)) if scales is None else np.asarray(scales, dtype=float)
+    return W, scales[:, None] * np.asarray(res.translation_directions, dtype=float)
+
+
 class WarmStarts:
     """
     What the solves of a stream hand to the next one: the solver's warm start.
@@ -104,6 +117,7 @@ class WarmStarts:
         self.search_stamp = math.nan
         self.rescans = 0                 # rescans done (whose turn is next)
         self._rescans_reset()
+        self.rescan_out: Optional[Tuple[int, np.ndarray]] = None   # in a lane: (body, its w)
 
     def _rescans_reset(self) -> None:
         """Rescan at the RESCAN_EVERY-th step from now, no back-off."""
@@ -133,7 +147,7 @@ class WarmStarts:
             if method.accepts('step') and not self.full_solve_due():
                 out['step'] = True
                 self._rescanned = None
-                if self.until_rescan <= 0:
+                if self.until_rescan <= 0 and self.rescan_out is None:
                     # one body in turn: its pivot search costs about three steps
                     body = self.rescans % n
                     out['rescan'] = [body]
@@ -146,10 +160,72 @@ class WarmStarts:
             self.floor = (floor, left - 1) if left > 1 else None
         return out
 
-    def step_declined(self) -> None:
-        """Note a step that did not hold (``StepNotTaken``): a full solve next, no rescan made."""
-        self.full_next = True
+    def rescan_aside(self, handed: bool) -> None:
+        """
+        Take the rescan out of the step just asked for (:meth:`keywords`).
+
+        ``handed``: it went to a solver lane (:meth:`rescan_returned` takes its answer, and no
+        other rescan is asked for until then); else it is asked for again at the next step.
+        """
+        if handed:
+            self.rescan_out = self._rescanned
         self._rescanned = None
+
+    def rescan_meanwhile(self, W: np.ndarray) -> List[int]:
+        """
+        Return the body ``[b]`` to rescan in a step taken while a full solve is out.
+
+        ``W (n, 3)``: the step's starting rotations. The steps before it did not hold, so the
+        running fit stays as it was until the full solve is back; a rescan's new basin
+        (:meth:`step_declined`) is the one thing that can change it meanwhile.
+        """
+        body = self.rescans % W.shape[0]
+        self._rescanned = (body, np.array(W[body], dtype=float))
+        return [body]
+
+    def rescan_returned(self, motions: Optional[Tuple[np.ndarray, np.ndarray]]) -> bool:
+        """
+        Take a lane's answer to the rescan handed to it; return whether it changed the body.
+
+        ``motions``: the motions ``(W, T) (n, 3)`` of the step that made it, on the window it
+        was asked for; None when it failed or was dropped (asked for again at the next step).
+        As :meth:`_rescan_noted`.
+        """
+        out, self.rescan_out = self.rescan_out, None
+        if out is None:
+            return False
+        if motions is None:
+            self.until_rescan = min(self.until_rescan, 0)
+            return False
+        return self._rescan_noted(out, *motions)
+
+    def step_declined(self, motions: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> None:
+        """
+        Note a step that did not hold (``StepNotTaken``): a full solve next.
+
+        ``motions``: the step's (:attr:`.StepNotTaken.motions`); the rescan it made, if any,
+        counts with them (:meth:`_rescan_noted`), else as not made.
+        """
+        self.full_next = True
+        out, self._rescanned = self._rescanned, None
+        if out is not None and motions is not None:
+            self._rescan_noted(out, *motions)
+
+    def _rescan_noted(self, out: Tuple[int, np.ndarray], W: np.ndarray, T: np.ndarray
+                      ) -> bool:
+        """
+        Note a rescan made outside a step that held; return whether it changed the body.
+
+        ``out``: the body and its rotation before; ``W, T (n, 3)``: the motions after. A body
+        the rescan moved to another basin (:data:`RESCAN_SWITCH`) takes the rescan's motion (a
+        lane's: the steps since have only refined the old one). Counted for the back-off as a
+        rescan in a step.
+        """
+        switched = self._backed_off(out, W)
+        if switched:
+            self.motions[out[0]] = (np.array(W[out[0]], dtype=float),
+                                    np.array(T[out[0]], dtype=float))
+        return switched
 
     def full_solve_due(self) -> bool:
         """Whether the next solve of a method that steps is a search or a full solve."""
@@ -187,13 +263,21 @@ class WarmStarts:
         if self._rescanned is None:
             self.until_rescan -= 1
             return
-        body, before = self._rescanned
-        self._rescanned = None
-        after = np.asarray(res.segmentation_angular_velocities, dtype=float).reshape(-1, 3)
-        n = after.shape[0]
+        out, self._rescanned = self._rescanned, None
+        self._backed_off(out, np.asarray(res.segmentation_angular_velocities,
+                                         dtype=float).reshape(-1, 3))
+
+    def _backed_off(self, out: Tuple[int, np.ndarray], W: np.ndarray) -> bool:
+        """
+        Note a rescan for the back-off; return whether it moved its body to another basin.
+
+        ``out``: the body and its rotation before; ``W (n, 3)``: the rotations after.
+        """
+        body, before = out
+        n = W.shape[0]
         if body >= n:
-            return
-        after = after[body]
+            return False
+        after = W[body]
         moved = float(np.linalg.norm(after - before))
         rate = max(float(np.linalg.norm(before)), float(np.linalg.norm(after)))
         switched = not moved <= max(RESCAN_SWITCH * rate, RESCAN_SWITCH_FLOOR)
@@ -201,14 +285,12 @@ class WarmStarts:
         self.quiet = 0 if switched else self.quiet + 1
         doublings = min(self.quiet // n, 8)              # beyond RESCAN_EVERY_MAX anyway
         self.until_rescan = min(RESCAN_EVERY << doublings, RESCAN_EVERY_MAX) - 1
+        return switched
 
     def remember(self, res: SegmentationResult, ids: np.ndarray, valid: np.ndarray) -> None:
         """Keep the motions of the valid bodies of ``res`` under their stable ``ids``."""
         if res.translation_directions is None:
             return
-        segmented = np.asarray(res.segmentation_angular_velocities, dtype=float).reshape(-1, 3)
-        scales = res.diagnostics.translation_scales
-        scales = np.ones(len(segmented)) if scales is None else np.asarray(scales, dtype=float)
+        W, T = result_motions(res)
         for j in np.flatnonzero(valid):                  # bodies, not lines
-            self.motions[int(ids[j])] = (segmented[j], scales[j]
-                                         * np.asarray(res.translation_directions[j]))
+            self.motions[int(ids[j])] = (W[j], T[j])
