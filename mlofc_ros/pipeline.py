@@ -765,11 +765,12 @@ class Pipeline:
             keywords['step'] = True
             if lane.busy and self._warm.full_next:
                 # the steps do not hold until the full solve is back: each rescans a body in
-                # turn, whose new basin holds meanwhile (replayed at 30 Hz, below)
+                # turn, whose new basin holds meanwhile (docs/design/general.md: the answers
+                # come back stale, and the steps from a wrong basin would wait for them)
                 keywords['rescan'] = self._warm.rescan_meanwhile(keywords['init_motions'][0])
         elif 'rescan' in keywords:
-            # a rescan (a step of about 90 ms, 3-4 of them) to the lane when it is idle, this
-            # frame a plain step: at 30 Hz the steps alone keep up with the camera
+            # a rescan (a step of about 90 ms instead of 20) to the lane when it is idle, this
+            # frame a plain step: at 30 Hz the plain steps keep up with the camera
             keywords = dict(keywords)
             rescan = keywords.pop('rescan')
             handed = not lane.busy
