@@ -26,7 +26,7 @@ to the parent. The solve side's state (body ids, warm starts, count, focal estim
 the child. The child is ``python -m mlofc_ros.solve_process`` (the parent's interpreter and
 environment) in a process group of its own, talking over a socket pair: it ends when told to, or
 when the parent's end closes (the parent ended, however). Its full solves (a search: 1-2 s)
-and rescans run in one more child of its own at a lower priority, a solver lane
+and rescans run in one more child of its own, a solver lane
 (:class:`ProcessLane`, :mod:`mlofc_ros.lane`), while it steps the frames from the running fit
 (about 20 ms each): a live node at 30 Hz solved 15-57% of the frames when the full solves ran
 in turn, 32-70% with the lane, 75-86% with the rescans there too (bench live, own2+bg; the
@@ -41,7 +41,6 @@ Example::
 """
 import dataclasses
 from multiprocessing.connection import Connection
-import os
 import signal
 import socket
 import subprocess
@@ -55,12 +54,6 @@ if TYPE_CHECKING:                      # the child imports the pipeline after it
 
 #: Seconds to wait for the child to end on :meth:`SolveProcess.close` before killing it.
 CLOSE_TIMEOUT = 5.0
-
-#: Niceness a solver lane's child adds to its own: its full solves and rescans take the CPU
-#: the frames' steps leave, not half of it (bench live at 30 Hz, 2-core EPYC, six seeds,
-#: own2+bg / own3+bg, one run each: frames solved 82 / 46% -> 86 / 55%; wrong % within the
-#: runs' spread).
-LANE_NICENESS = 10
 
 
 class SolverProcessError(RuntimeError):
@@ -80,10 +73,6 @@ def _serve(conn: Connection) -> None:
     except (EOFError, OSError):
         return
     if params is None:                  # a lane's child: it only runs jobs
-        try:
-            os.nice(LANE_NICENESS)
-        except OSError:                 # a platform without it: the lane at the solver's
-            pass
         _serve_requests(conn, None)
         return
     pipeline = Pipeline(**params)
