@@ -62,3 +62,10 @@ def test_a_short_replay_writes_its_report(tmp_path):
     text = (tmp_path / 'README.md').read_text()
     assert 'every frame in turn' in text and '| own2+bg | x1 | 1 |' in text
     assert (tmp_path / 'lane.png').stat().st_size > 0
+
+
+def test_an_unknown_scene_is_refused_with_the_known_ones():
+    import pytest
+    with pytest.raises(SystemExit):
+        lane.parse_args(['--scenes', 'own2+bg,nowhere'])
+    assert lane.parse_args(['--scenes', 'own3']).scenes == ['own3']

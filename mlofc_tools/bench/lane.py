@@ -38,7 +38,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 from mlofc_ros.lane import InlineLane, SolveJob
 from mlofc_tools.bench import common
-from mlofc_tools.bench.spinning import render_scene, SCENES, score_run
+from mlofc_tools.bench.spinning import render_scene, scene_list, score_run
 import numpy as np
 
 #: Frames between a lane job's submission and its answer at scale 1, by job: a search, a
@@ -151,7 +151,8 @@ def plot(path, records: Sequence[Dict[str, object]]) -> None:
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench lane',
                                 description=__doc__.split('\n')[1])
-    p.add_argument('--scenes', default='own2+bg,own3+bg', help='scenes of bench spinning')
+    p.add_argument('--scenes', type=scene_list, default=['own2+bg', 'own3+bg'],
+                   help='comma-separated scenes of bench spinning')
     p.add_argument('--seeds', default='0,1,2,3,4,5', help='render seeds')
     p.add_argument('--delays', default='0,1',
                    help='scales of the lane delays (0: every frame solved in turn, no lane)')
@@ -165,14 +166,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     import sys
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
-    scenes = [s for s in args.scenes.split(',') if s]
-    unknown = [s for s in scenes if s not in SCENES]
-    if unknown:
-        print(f'unknown scenes {unknown}; choose from {list(SCENES)}', file=sys.stderr)
-        return 2
     t0 = time.monotonic()
     revision = common.commit()       # before the runs import the code
-    items = [(scene, int(seed), float(scale), args.frames) for scene in scenes
+    items = [(scene, int(seed), float(scale), args.frames) for scene in args.scenes
              for scale in args.delays.split(',') if scale for seed in args.seeds.split(',')
              if seed]
     records = common.run_parallel(run_one, items, args.jobs, 'runs', reports=len(items))

@@ -179,10 +179,19 @@ def score_run(seq, outs: Sequence[Tuple[object, float]], first: int) -> Dict[str
             'mapping': mapping, 'ms_max': max((o[1] for o in outs), default=math.nan)}
 
 
+def scene_list(text: str) -> List[str]:
+    """Return the scene names of comma-separated ``text`` (an argparse type: unknown ones fail)."""
+    scenes = [s for s in text.split(',') if s]
+    unknown = [s for s in scenes if s not in SCENES]
+    if unknown:
+        raise argparse.ArgumentTypeError(f'unknown scenes {unknown}; choose from {list(SCENES)}')
+    return scenes
+
+
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench spinning',
                                 description=__doc__.split('\n')[0])
-    p.add_argument('--scenes', default=','.join(SCENES),
+    p.add_argument('--scenes', type=scene_list, default=list(SCENES),
                    help=f'comma-separated scenes from {list(SCENES)}')
     p.add_argument('--methods', default='robust,general', help='comma-separated solver methods')
     p.add_argument('--windows', default='5,10', help='comma-separated window lengths (frames)')
@@ -321,11 +330,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     import sys
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
-    scenes = [s for s in args.scenes.split(',') if s]
-    unknown = [s for s in scenes if s not in SCENES]
-    if unknown:
-        print(f'unknown scenes {unknown}; choose from {list(SCENES)}', file=sys.stderr)
-        return 2
+    scenes = args.scenes
     methods = [m for m in args.methods.split(',') if m]
     windows = [int(w) for w in args.windows.split(',') if w]
     seeds = [int(s) for s in args.seeds.split(',') if s]
