@@ -76,10 +76,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     if args.quick:
         args.scenes, args.seeds, args.rates, args.frames, args.window = \
             'own2', '0', '10', 15, 5
-    args.scene_list = [s for s in args.scenes.split(',') if s]
-    unknown = [s for s in args.scene_list if s not in spinning.SCENES]
-    if unknown:
-        ap.error(f'unknown scenes {unknown}; choose from {list(spinning.SCENES)}')
+    try:
+        args.scene_list = spinning.scene_list(args.scenes)
+    except argparse.ArgumentTypeError as exc:
+        ap.error(str(exc))
     args.seed_list = [int(s) for s in args.seeds.split(',') if s]
     args.rate_list = [float(r) for r in args.rates.split(',') if r]
     return args
