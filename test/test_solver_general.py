@@ -22,7 +22,8 @@ from mlofc_ros.solver.general import (body_covariance, fit_body, fit_body_multis
 from mlofc_ros.solver.general.eigen import smallest_eigenpair
 from mlofc_ros.solver.general.fit import _lm_runs, robust_scale
 from mlofc_ros.solver.general.jacobian import left_jacobian, normal_equations
-from mlofc_ros.solver.general.model import _design, _direction_columns, _evaluate
+from mlofc_ros.solver.general.model import (_costs2, _design, _direction_columns, _evaluate,
+                                            _row_products)
 from mlofc_ros.solver.lines import orthonormal_pair, rotation_matrix, skew
 import numpy as np
 import pytest
@@ -125,6 +126,31 @@ def test_residual_is_zero_at_the_true_motion_and_not_without_translation():
     assert res.max() < 1e-6
     rot_only, _ = line_residuals(obs, idx, w, np.zeros(3))
     assert rot_only.mean() > 100.0           # the rotation-only model cannot explain it
+
+
+def test_fitted_costs_from_the_gram_blocks_match_the_constraints():
+    # the fitted-direction costs of every body come from the motion's Gram blocks (the
+    # columns projected out through their 2x2 Gram matrix) instead of the 2K x 3 constraints;
+    # the same two passes as line_residuals, with T scaled or zero (no columns: the
+    # rotation-only cost) and a track seen in three frames only
+    tracks, w, t = spinning_lines(n_lines=12, n_frames=6, seed=2)
+    tracks = tracks + np.random.default_rng(0).normal(scale=0.5, size=tracks.shape)
+    tracks[4, 3:] = np.nan
+    obs = LineObservations(tracks, (F, F, C, C))
+    idx = np.arange(12)
+    for tt in (t, 0.03 * t, np.zeros(3), np.array([0.3, -0.1, 0.9])):
+        first, n0 = line_residuals(obs, idx, w * 1.05, tt)
+        direct, _ = line_residuals(obs, idx, w * 1.05, tt, n0)
+        gram = general_costs(obs, (w * 1.05)[None], tt[None])[:, 0]
+        assert np.allclose(gram, direct, rtol=1e-6, atol=1e-9 * direct.max())
+    # a body's row products are gathered from the window's, as computed for its rows alone
+    pick = np.array([[3, 0, 7], [5, 5, 1]])
+    assert np.array_equal(obs.row_products(pick), _row_products(obs.rows[pick]))
+    assert np.array_equal(obs.row_products(), _row_products(obs.rows))
+    cost, _ = _costs2(obs.rows[pick], obs.m_first[pick], np.array([w, w]), np.array([t, t]),
+                      None)
+    assert np.allclose(cost, _costs2(obs.rows[pick], obs.m_first[pick], np.array([w, w]),
+                                     np.array([t, t]), None, products=obs.row_products(pick))[0])
 
 
 def test_fit_body_recovers_rotation_and_translation_direction():

@@ -70,7 +70,8 @@ def body_covariances(obs: LineObservations, members: Sequence[np.ndarray], W: np
     W, T = np.asarray(W, dtype=float)[some], np.asarray(T, dtype=float)[some]
     rows, base = obs.rows[idx], obs.m_first[idx]
     sigma = sigma2 if marginal else None
-    _, n0 = _costs2(rows, base, W, T, sigma)
+    products = obs.row_products(idx)
+    _, n0 = _costs2(rows, base, W, T, sigma, products=products)
     # the Gauss-Newton information with the line directions marginalised (or fitted) and the
     # moments held, analytic (:func:`.jacobian.normal_equations`), in units of sigma2
     info = normal_equations(rows, W, T, n0, orthonormal_pair(n0), sigma, mask=mask)[0]
@@ -79,7 +80,7 @@ def body_covariances(obs: LineObservations, members: Sequence[np.ndarray], W: np
         # the data term alone: the fitted-direction costs (px^2, two unknowns per line); the
         # marginal residuals also hold the direction prior, which does not scale with sigma2
         if fitted is None:
-            costs = _costs2(rows, base, W, T, None)[0]
+            costs = _costs2(rows, base, W, T, None, products=products)[0]
         else:
             costs = np.zeros(idx.shape)
             for i, b in enumerate(some):                              # bodies, not lines

@@ -26,7 +26,7 @@ from typing import NamedTuple, Optional, Sequence, Tuple
 import numpy as np
 
 from .jacobian import normal_equations
-from .model import _costs2, _row_products, LineObservations
+from .model import _costs2, LineObservations
 from ..lines import orthonormal_pair
 from ..models import chi2_quantile
 
@@ -97,16 +97,17 @@ _BATCH = 50000
 
 
 def _scan_costs(rows: np.ndarray, base: np.ndarray, w: np.ndarray, T: np.ndarray,
-                sigma2: Optional[float], scale: Optional[np.ndarray] = None) -> list:
+                sigma2: Optional[float], scale: Optional[np.ndarray] = None,
+                products: Optional[np.ndarray] = None) -> list:
     """
     Return the total two-pass cost of the tracks ``rows`` at each motion ``(w, T)``.
 
     ``T (C, 3)``; ``w (3,)`` for all of them or ``(C, 3)``, one per candidate. ``scale``: the
-    robust per-line cost's (:func:`robust_scale`), None for least squares.
+    robust per-line cost's (:func:`robust_scale`), None for least squares. ``products``:
+    the tracks' :meth:`.LineObservations.row_products` if known.
     """
     size = max(1, _BATCH // max(rows.shape[0] * rows.shape[1], 1))
     w = np.broadcast_to(w, T.shape)
-    products = None if sigma2 is None else _row_products(rows)
     out: list = []
     for s in range(0, T.shape[0], size):                 # chunks of many candidates
         res, _ = _totals(rows, base, w[s:s + size], T[s:s + size], sigma2, scale,
@@ -152,7 +153,7 @@ def rescale_translations(obs: LineObservations, members: Sequence[np.ndarray], W
         part = slice(s, s + size)
         rows = obs.rows[idx[part]]                                  # (B, L, K, 2, 3)
         res, _ = _costs2(rows, obs.m_first[idx[part]][:, None], w[part], cands[part], sigma2,
-                         products=_row_products(rows)[:, None])        # (B, R, L)
+                         products=obs.row_products(idx[part])[:, None])  # (B, R, L)
         totals = np.where(mask[part, None] > 0, res, 0.0).sum(axis=-1)
         out[part] = cands[part][np.arange(totals.shape[0]), np.argmin(totals, axis=1)]
     return out
@@ -168,7 +169,7 @@ class _Tracks(NamedTuple):
     """
 
     rows: np.ndarray                 # (L, K, 2, 3) observation rows, gathered once
-    products: Optional[np.ndarray]   # (9K, L) their row products (marginalised costs)
+    products: np.ndarray             # (9K, L) their row products
     sigma2: Optional[float]          # None: fitted line directions; else marginalised (px^2)
     scale: Optional[np.ndarray]      # (L,) robust cost's scale; None: least squares
     mask: Optional[np.ndarray] = None    # (S, L) per run: 1 its lines, 0 padding; None: shared
@@ -183,7 +184,7 @@ class _Tracks(NamedTuple):
         if self.mask is None:
             return self
         pick = np.asarray(runs, dtype=np.intp)
-        return _Tracks(self.rows[pick], None if self.products is None else self.products[pick],
+        return _Tracks(self.rows[pick], self.products[pick],
                        self.sigma2, None if self.scale is None else self.scale[pick],
                        self.mask[pick])
 
@@ -228,7 +229,7 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
     """
     scale = None if robust is None else robust_scale(obs.frames[idx], robust)
     rows = obs.rows[idx]
-    tracks = _Tracks(rows, None if sigma2 is None else _row_products(rows), sigma2, scale, mask)
+    tracks = _Tracks(rows, obs.row_products(idx), sigma2, scale, mask)
     W = np.array(W0, dtype=float)
     T = np.array(T0, dtype=float)
     if not tracks.free:

@@ -75,11 +75,25 @@ class LineObservations:
         self.midpoints = first_midpoints(tracks)
         rays = normalise_points(self.midpoints, intrinsics)
         self.rays = rays / np.linalg.norm(rays, axis=1, keepdims=True)
+        self._products: Optional[np.ndarray] = None
 
     @property
     def n_tracks(self) -> int:
         """Return the number of tracks ``N``."""
         return self.rows.shape[0]
+
+    def row_products(self, idx: Optional[np.ndarray] = None) -> np.ndarray:
+        """
+        Return :func:`_row_products` of the tracks ``idx (..., L)``, ``(..., 9 K, L)``.
+
+        ``idx`` None: every track, ``(9 K, N)``. Made once per window and gathered: every fit
+        and cost evaluation of a body's tracks starts from them.
+        """
+        if self._products is None:
+            self._products = _row_products(self.rows)
+        if idx is None:
+            return self._products
+        return np.ascontiguousarray(np.moveaxis(self._products[:, idx], 0, -2))
 
     def body_ray(self, idx: np.ndarray) -> np.ndarray:
         """Return the unit ray ``(3,)`` towards the tracks ``idx`` (camera frame)."""
@@ -180,7 +194,12 @@ def _apply(P: np.ndarray, n0: np.ndarray) -> np.ndarray:
 
 def _line_eval(An: np.ndarray, AvB: np.ndarray, base: np.ndarray,
                fixed: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
-    """Evaluate :func:`line_residuals` from the constraints ``An``, ``AvB`` (batched)."""
+    """
+    Evaluate :func:`line_residuals` from the constraints ``An``, ``AvB`` (batched).
+
+    The solver's own fitted-direction costs take the Gram form (:func:`_marginal_costs` with
+    ``sigma2`` None); this one, from the constraints, is :func:`line_residuals`' reference.
+    """
     # orthonormal basis of the two columns (Gram-Schmidt, vectorised), then project them out
     q1 = AvB[..., 0]
     n1 = np.linalg.norm(q1, axis=-1, keepdims=True)
@@ -233,13 +252,14 @@ def _grams(products: np.ndarray, w: np.ndarray, t: np.ndarray, n_frames: int) ->
             for n, key in enumerate(('nn', 'vn', 'vv'))}
 
 
-def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: float,
+def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: Optional[float],
                     basis: Optional[np.ndarray] = None, logdet_out: Optional[list] = None
                     ) -> Tuple[np.ndarray, np.ndarray]:
     """
     Return :func:`marginal_residuals`' costs ``(..., L)`` and moments ``(..., L, 3)``.
 
-    From the :data:`Grams` ``grams``.
+    From the :data:`Grams` ``grams``; ``sigma2`` None: :func:`line_residuals`' (fitted
+    directions).
 
     With the whitened direction columns ``M = Av B / sqrt(sigma2)`` (``B`` the basis of the
     plane orthogonal to ``base``, :func:`.orthonormal_pair` or ``basis``) and ``S = M^T M``
@@ -247,7 +267,10 @@ def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: float,
     ``An^T (I + M M^T)^-1 An = An^T An - G^T (I + S)^-1 G`` with ``G = M^T An`` (Woodbury),
     and the log-determinant ``log det(I + S)``: no ``2K x 3`` products, a few 3x3 and 2x2
     ones per line, written out element-wise over the batch (stacked 3x3 matrix products cost
-    several times more at the solver's batch sizes).
+    several times more at the solver's batch sizes). Fitted directions project the columns
+    ``M = Av B`` out instead: ``An^T An - G^T S^+ G`` (:func:`_column_projector`), as
+    :func:`_line_eval` does from the constraints at twice the cost (its relative difference
+    up to 5e-6 on the costs of bench spinning's windows).
     """
     B = orthonormal_pair(base) if basis is None else basis          # (..., L, 3, 2)
     b = [[B[..., i, c] for i in range(3)] for c in range(2)]        # b[c][i]: column c
@@ -255,26 +278,61 @@ def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: float,
     # Av^T Av B and B^T Av^T An, column by column
     vvb = [[vv[i][0] * b[c][0] + vv[i][1] * b[c][1] + vv[i][2] * b[c][2] for i in range(3)]
            for c in range(2)]
-    S = [[(b[c][0] * vvb[e][0] + b[c][1] * vvb[e][1] + b[c][2] * vvb[e][2]) / sigma2
-          for e in range(2)] for c in range(2)]
-    root = 1.0 / np.sqrt(sigma2)
-    G = [[(b[c][0] * vn[0][j] + b[c][1] * vn[1][j] + b[c][2] * vn[2][j]) * root
-          for j in range(3)] for c in range(2)]
-    s00, s01, s11 = 1.0 + S[0][0], 0.5 * (S[0][1] + S[1][0]), 1.0 + S[1][1]
-    # det(I + S) >= 1 (rounding could take it below, then its log's root would be NaN)
-    det = np.maximum(s00 * s11 - s01 * s01, 1.0)
-    logdet = sigma2 * np.log(det)
-    if logdet_out is not None:
-        logdet_out.append(logdet)
-    # X = (I + S)^-1 G, the 2x2 inverse written out; C = An^T An - G^T X
-    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+    logdet = None
+    if sigma2 is None:
+        S = [[b[c][0] * vvb[e][0] + b[c][1] * vvb[e][1] + b[c][2] * vvb[e][2]
+              for e in range(2)] for c in range(2)]
+        G = [[b[c][0] * vn[0][j] + b[c][1] * vn[1][j] + b[c][2] * vn[2][j] for j in range(3)]
+             for c in range(2)]
+        i00, i01, i11 = _column_projector(S[0][0], 0.5 * (S[0][1] + S[1][0]), S[1][1])
+    else:
+        S = [[(b[c][0] * vvb[e][0] + b[c][1] * vvb[e][1] + b[c][2] * vvb[e][2]) / sigma2
+              for e in range(2)] for c in range(2)]
+        root = 1.0 / np.sqrt(sigma2)
+        G = [[(b[c][0] * vn[0][j] + b[c][1] * vn[1][j] + b[c][2] * vn[2][j]) * root
+              for j in range(3)] for c in range(2)]
+        s00, s01, s11 = 1.0 + S[0][0], 0.5 * (S[0][1] + S[1][0]), 1.0 + S[1][1]
+        # det(I + S) >= 1 (rounding could take it below, then its log's root would be NaN)
+        det = np.maximum(s00 * s11 - s01 * s01, 1.0)
+        logdet = sigma2 * np.log(det)
+        if logdet_out is not None:
+            logdet_out.append(logdet)
+        # (I + S)^-1, the 2x2 inverse written out
+        i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+    # X = (I + S)^-1 G (or S^+ G); C = An^T An - G^T X
     X = [[i00 * G[0][j] + i01 * G[1][j] for j in range(3)],
          [i01 * G[0][j] + i11 * G[1][j] for j in range(3)]]
     C = {(i, j): nn[i][j] - G[0][i] * X[0][j] - G[1][i] * X[1][j]
          for i in range(3) for j in range(i, 3)}
     val, n0 = smallest_eigenpair_parts(C[0, 0], C[0, 1], C[0, 2], C[1, 1], C[1, 2], C[2, 2])
     val, n0 = _toward(val, n0, base)
-    return val + logdet, n0
+    return (val, n0) if logdet is None else (val + logdet, n0)
+
+
+#: Condition number of the direction columns' Gram matrix ``S`` above which they count as
+#: one column (:func:`_column_projector`); the Gram form loses about ``eps * cond`` of the
+#: residual there.
+COLUMN_COND = 1e12
+
+
+def _column_projector(s00: np.ndarray, s01: np.ndarray, s11: np.ndarray
+                      ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return the entries ``(00, 01, 11)`` of the pseudo-inverse of ``S = [[s00, s01], [s01, s11]]``.
+
+    ``S (...)`` entries of positive semi-definite 2x2 matrices: the Gram matrices of a line's
+    two direction columns. Full rank below :data:`COLUMN_COND`; else one column (``S / tr^2``,
+    parallel columns) or none (zero: no translation, the rotation-only model).
+    """
+    tr = s00 + s11
+    det = s00 * s11 - s01 * s01
+    full = det * COLUMN_COND > tr * tr
+    one = ~full & (tr > 0.0)
+    inv = 1.0 / np.where(full, det, np.where(one, tr * tr, 1.0))
+    zero = ~(full | one)
+    return (np.where(zero, 0.0, np.where(full, s11, s00) * inv),
+            np.where(zero, 0.0, np.where(full, -s01, s01) * inv),
+            np.where(zero, 0.0, np.where(full, s00, s11) * inv))
 
 
 def _marginal_vectors(An: np.ndarray, M: np.ndarray, fixed: np.ndarray, sigma2: float,
@@ -374,8 +432,7 @@ def marginal_residuals(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t:
     """
     base = obs.m_first[idx] if n0 is None else n0
     if fixed is None:
-        rows = obs.rows[idx]
-        grams = _grams(_row_products(rows), w, t, rows.shape[1])
+        grams = _grams(obs.row_products(idx), w, t, obs.rows.shape[1])
         return _marginal_costs(grams, base, sigma2, logdet_out=logdet_out)
     An, Av = _design(obs.rows[idx], w, t)
     return _evaluate(An, Av, base, sigma2, fixed, logdet_out=logdet_out)
@@ -391,14 +448,12 @@ def _costs2(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
     ``rows (L, K, 2, 3)``: the tracks' observation rows, or ``(..., L, K, 2, 3)`` each
     motion its own; ``w, t (..., 3)`` one motion or a
     batch; ``base (L, 3)`` or ``(..., L, 3)`` the first pass's moments, ``basis`` their
-    :func:`.orthonormal_pair` if known. Both passes share the motion's constraints.
+    :func:`.orthonormal_pair` if known. ``sigma2`` None: fitted directions
+    (:func:`line_residuals`); else marginalised. Both passes share the motion's
+    :data:`Grams`.
     ``logdet_out``: a list that receives the second pass's log-determinant terms (marginalised);
     ``products``: :func:`_row_products` of ``rows`` if already computed.
     """
-    if sigma2 is None:
-        An, Av = _design(rows, w, t)
-        _, n0 = _evaluate(An, Av, base, None, basis=basis)
-        return _evaluate(An, Av, n0, None)
     grams = _grams(_row_products(rows) if products is None else products, w, t, rows.shape[-3])
     _, n0 = _marginal_costs(grams, base, sigma2, basis)
     return _marginal_costs(grams, n0, sigma2, logdet_out=logdet_out)
@@ -414,7 +469,8 @@ def general_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray,
     ``nan`` for tracks with fewer than 3 frames (no constraint on a general motion).
     """
     # all bodies in one batch
-    out = np.ascontiguousarray(_costs2(obs.rows, obs.m_first, W, T, sigma2)[0].T)
+    out = np.ascontiguousarray(_costs2(obs.rows, obs.m_first, W, T, sigma2,
+                                       products=obs.row_products())[0].T)
     out[obs.frames < 3] = np.nan
     return out
 
@@ -428,7 +484,7 @@ def marginal_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray, sigma2: 
     """
     parts: list = []
     # all bodies in one batch
-    out = np.ascontiguousarray(_costs2(obs.rows, obs.m_first, W, T, sigma2,
-                                       logdet_out=parts)[0].T)
+    out = np.ascontiguousarray(_costs2(obs.rows, obs.m_first, W, T, sigma2, logdet_out=parts,
+                                       products=obs.row_products())[0].T)
     out[obs.frames < 3] = np.nan
     return out, np.ascontiguousarray(parts[0].T)

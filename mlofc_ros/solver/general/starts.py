@@ -154,6 +154,7 @@ def _multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
     """Return :func:`fit_body_multistart`'s starts ``W, T (S, 3)`` of the tracks ``idx``."""
     rows, base = obs.rows[idx], obs.m_first[idx]
     scale = None if robust is None else robust_scale(obs.frames[idx], robust)
+    products = obs.row_products(idx)
     if sigma2 is None and t0 is not None:
         starts = np.atleast_2d(t0)
     else:
@@ -167,13 +168,14 @@ def _multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
                 extra.append(np.atleast_2d(t0))
             cands = np.concatenate(extra + [(dirs[:, None, :] * T_SCALES[:, None]
                                              ).reshape(-1, 3)])
-        scan = _scan_costs(rows, base, np.asarray(w0, dtype=float), cands,
-                           sigma2, scale)                # a few hundred starts, vectorised
+        # a few hundred starts, vectorised
+        scan = _scan_costs(rows, base, np.asarray(w0, dtype=float), cands, sigma2, scale,
+                           products)
         starts = cands[np.argsort(scan)[:keep]]
     w_starts = np.broadcast_to(np.asarray(w0, dtype=float), starts.shape)
     if ray is not None and pivots:
         pw, pt = pivot_starts(np.asarray(ray, dtype=float))
-        best = pivot_picks(_scan_costs(rows, base, pw, pt, sigma2, scale), per_rate)
+        best = pivot_picks(_scan_costs(rows, base, pw, pt, sigma2, scale, products), per_rate)
         w_starts = np.concatenate([w_starts, pw[best]])
         starts = np.concatenate([starts, pt[best]])
     return w_starts, starts
