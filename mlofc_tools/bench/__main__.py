@@ -27,6 +27,7 @@ BENCHMARKS = {
     'ros': 'highest image rate the running node keeps up with, and its latency',
     'live': 'spinning boxes published to the running node in real time (method general)',
     'lane': "the node's solver lane replayed offline with fixed delays (method general)",
+    'step': 'one warm solver update of general against LSD alone, by number of lines',
     'soak': 'resident memory over a long run of the pipeline (10,000 frames)',
     'spinning': 'boxes spinning about their own centres through the pipeline: robust vs general',
     'real': 'visp_cube (real, no ground truth) scored by a motion proxy: robust vs general',
