@@ -26,9 +26,10 @@ first 10 are solved cold (untimed), and the window one frame later is the update
 from that solve's labels and motions. Timed in turn, CPU of this thread
 (``time.thread_time``), so that all see the same machine load: LSD alone on frames of
 ``bench spinning``'s own3+bg (640x480), the plain step, the step that rescans one body, and
-for scale ``robust``'s warm solve of the last 5 frames (its own window). Calls: the Python-
-level calls of one step (``cProfile``'s count, numpy's included), the same on every machine:
-at these array sizes most calls cost their fixed overhead.
+for scale ``robust``'s warm solve of the last 5 frames (its own window). Calls: the function
+calls of one step (``cProfile``'s count: Python's and numpy's functions, not numpy's
+arithmetic operators), the same on every machine; a step's CPU grows little with its lines:
+at these array sizes most numpy calls and operations cost their fixed overhead.
 """
 import argparse
 import cProfile
@@ -82,7 +83,7 @@ def _updates(n_lines: int, seed: int) -> Tuple[Dict[str, Callable[[], object]], 
 
 
 def count_calls(fn: Callable[[], object]) -> int:
-    """Return the Python-level calls (numpy's included) of one call of ``fn``."""
+    """Return the function calls (``cProfile``'s count) of one call of ``fn``."""
     profile = cProfile.Profile()
     profile.enable()
     try:
