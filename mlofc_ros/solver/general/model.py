@@ -269,8 +269,9 @@ def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: Optional[float],
     ones per line, written out element-wise over the batch (stacked 3x3 matrix products cost
     several times more at the solver's batch sizes). Fitted directions project the columns
     ``M = Av B`` out instead: ``An^T An - G^T S^+ G`` (:func:`_column_projector`), as
-    :func:`_line_eval` does from the constraints at twice the cost (its relative difference
-    up to 5e-6 on the costs of bench spinning's windows).
+    :func:`_line_eval` does from the constraints at twice the cost: the two differ by up to
+    5e-6 relative on bench spinning's windows, 5e-4 on a near-perfect line of visp_cube
+    (a cost of 5e-6 px^2 from Gram entries of 3e6: the subtraction's rounding, 3e-9 px^2).
     """
     B = orthonormal_pair(base) if basis is None else basis          # (..., L, 3, 2)
     b = [[B[..., i, c] for i in range(3)] for c in range(2)]        # b[c][i]: column c
