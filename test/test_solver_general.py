@@ -22,8 +22,8 @@ from mlofc_ros.solver.general import (body_covariance, fit_body, fit_body_multis
 from mlofc_ros.solver.general.eigen import smallest_eigenpair
 from mlofc_ros.solver.general.fit import _lm_runs, robust_scale
 from mlofc_ros.solver.general.jacobian import left_jacobian, normal_equations
-from mlofc_ros.solver.general.model import (_costs2, _design, _direction_columns, _evaluate,
-                                            _row_products)
+from mlofc_ros.solver.general.model import (_column_projector, _costs2, _design,
+                                            _direction_columns, _evaluate, _row_products)
 from mlofc_ros.solver.lines import orthonormal_pair, rotation_matrix, skew
 import numpy as np
 import pytest
@@ -151,6 +151,21 @@ def test_fitted_costs_from_the_gram_blocks_match_the_constraints():
                       None)
     assert np.allclose(cost, _costs2(obs.rows[pick], obs.m_first[pick], np.array([w, w]),
                                      np.array([t, t]), None, products=obs.row_products(pick))[0])
+
+
+def test_the_column_projector_is_the_pseudo_inverse_of_the_columns_gram_matrix():
+    # two columns, two parallel ones (to rounding and exactly), none: S S+ S = S and S+ S S+ = S+
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(6, 2))
+    parallel = np.c_[a[:, 0], 3.0 * a[:, 0] + 1e-9 * a[:, 1]]
+    for cols in (a, parallel, np.c_[a[:, 0], -a[:, 0]], np.zeros((6, 2))):
+        S = cols.T @ cols
+        i00, i01, i11 = _column_projector(S[0, 0], S[0, 1], S[1, 1])
+        P = np.array([[i00, i01], [i01, i11]])
+        assert np.allclose(S @ P @ S, S, atol=1e-9 * max(np.abs(S).max(), 1e-300))
+        assert np.allclose(P @ S @ P, P, atol=1e-9 * max(np.abs(P).max(), 1e-300))
+        scale = max(np.abs(P).max(), 1e-300)
+        assert np.allclose(P, np.linalg.pinv(S, rcond=1e-6), atol=1e-9 * scale)
 
 
 def test_fit_body_recovers_rotation_and_translation_direction():
