@@ -33,7 +33,7 @@ Example::
 """
 from dataclasses import dataclass
 import math
-from typing import Optional, Sequence, Tuple, Union
+from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -398,6 +398,11 @@ def make_scene(n_bodies: int, lines_per_body: Union[int, Sequence[int]], n_frame
                           angular_velocities=w, translations=t, intrinsics=intrinsics,
                           image_size=(w_img, h_img), points=pts, noise_px=float(noise_px),
                           reference_frame=ref)
+
+
+def split_lines(total: int, n_bodies: int) -> List[int]:
+    """Return ``total`` lines over ``n_bodies`` bodies as evenly as possible (the first more)."""
+    return [total // n_bodies + (1 if i < total % n_bodies else 0) for i in range(n_bodies)]
 
 
 @dataclass

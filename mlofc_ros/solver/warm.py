@@ -149,9 +149,7 @@ class WarmStarts:
                 self._rescanned = None
                 if self.until_rescan <= 0 and self.rescan_out is None:
                     # one body in turn: its pivot search costs about three steps
-                    body = self.rescans % n
-                    out['rescan'] = [body]
-                    self._rescanned = (body, w[body].copy())
+                    out['rescan'] = self._next_rescan(w)
             elif method.rescans:
                 out['rescan'] = list(range(n))
         if method.accepts('warm_inliers') and self.floor is not None:
@@ -179,6 +177,10 @@ class WarmStarts:
         running fit stays as it was until the full solve is back; a rescan's new basin
         (:meth:`step_declined`) is the one thing that can change it meanwhile.
         """
+        return self._next_rescan(W)
+
+    def _next_rescan(self, W: np.ndarray) -> List[int]:
+        """Return the body ``[b]`` whose turn it is to be rescanned; note it with its w."""
         body = self.rescans % W.shape[0]
         self._rescanned = (body, np.array(W[body], dtype=float))
         return [body]

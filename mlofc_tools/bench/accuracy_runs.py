@@ -24,7 +24,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import mlofc_ros  # noqa: F401 (first of the package: one BLAS thread, set before numpy loads)
 from mlofc_tools.bench import common
 from mlofc_tools.scoring import best_permutation, motion_errors
-from mlofc_tools.synthetic import add_outliers, make_scene, MIXES
+from mlofc_tools.synthetic import add_outliers, make_scene, MIXES, split_lines
 import numpy as np  # noqa: I100 (numpy must load after mlofc_ros, see above)
 
 
@@ -100,11 +100,6 @@ Record = Dict[str, object]
 
 
 Raw = Dict[Tuple[str, Tuple, str], List[Record]]
-
-
-def _split_lines(total: int, n: int) -> List[int]:
-    """``total`` lines over ``n`` bodies as evenly as possible."""
-    return [total // n + (1 if i < total % n else 0) for i in range(n)]
 
 
 def _seed(base: int, section: str, indices: Sequence[int]) -> int:
@@ -336,7 +331,7 @@ def run_speed(grid: Grid, seed: int) -> Dict[int, Dict[str, Dict[str, np.ndarray
     reference_workload(data)
     out: Dict[int, Dict[str, Dict[str, np.ndarray]]] = {}
     for n_lines in grid.speed_lines:
-        scenes = [make_scene(3, _split_lines(n_lines, 3), n_frames=6, noise_px=1.0,
+        scenes = [make_scene(3, split_lines(n_lines, 3), n_frames=6, noise_px=1.0,
                              seed=_seed(seed, 'speed', (n_lines, s)))
                   for s in range(grid.speed_scenes)]
         calls = {'reference': lambda sc: reference_workload(data)}

@@ -64,10 +64,9 @@ def _updates(n_lines: int, seed: int) -> Tuple[Dict[str, Callable[[], object]], 
     """
     from mlofc_ros.solver import segment_lines
     from mlofc_ros.solver.warm import result_motions
-    from mlofc_tools.synthetic import make_scene
-    counts = [n_lines // BODIES + (b < n_lines % BODIES) for b in range(BODIES)]
-    sc = make_scene(BODIES, counts, n_frames=WINDOW + 1, noise_px=1.0, rotation_deg=ROTATION_DEG,
-                    translation_ratio=TRANSLATION_RATIO, seed=seed)
+    from mlofc_tools.synthetic import make_scene, split_lines
+    sc = make_scene(BODIES, split_lines(n_lines, BODIES), n_frames=WINDOW + 1, noise_px=1.0,
+                    rotation_deg=ROTATION_DEG, translation_ratio=TRANSLATION_RATIO, seed=seed)
     common_kw = {'intrinsics': sc.intrinsics, 'image_size': sc.image_size, 'seed': 0}
     cold = segment_lines(sc.tracks[:, :WINDOW], BODIES, method='general', **common_kw)
     warm = {'init_labels': cold.labels, 'init_motions': result_motions(cold), 'step': True,
