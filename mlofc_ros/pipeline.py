@@ -934,7 +934,8 @@ class Pipeline:
         try:
             evidence = focal_evidence(obs.win_tracks, np.asarray(res.labels), res.n_bodies,
                                       (w / 2.0, h / 2.0), focal,
-                                      noise_var=res.diagnostics.sigma_px ** 2)
+                                      noise_var=res.diagnostics.sigma_px ** 2,
+                                      motions=result_motions(res))
         except Exception as exc:  # noqa: B902 (a failed refinement must not lose the frame)
             problems.append(f'focal length not refined: {type(exc).__name__}: {exc}')
             return

@@ -18,7 +18,9 @@ import math
 from mlofc_ros.pipeline import focal_covariance
 from mlofc_ros.solver import segment_lines
 from mlofc_ros.solver.focal import (focal_evidence, FOCAL_OBSERVABLE, FOCAL_PRIOR_LOG_SIGMA,
-                                    FocalEstimate, FocalEvidence)
+                                    FocalEstimate, FocalEvidence, general_profiles)
+from mlofc_ros.solver.general import fit_bodies, LineObservations
+from mlofc_ros.solver.warm import result_motions
 from mlofc_tools.synthetic import make_scene
 import numpy as np
 import pytest
@@ -113,3 +115,52 @@ def test_a_failed_refinement_is_reported_and_the_frame_kept(monkeypatch):
     out = [p.process_lines(ids, sc.tracks[:, k], k / 30.0, SIZE) for k in range(22)]
     failed = [r for r in out if r.problem and 'focal length not refined' in r.problem]
     assert failed and all(r.solved for r in failed)
+
+
+def test_general_profile_of_a_scaled_image_is_the_profile_at_that_focal_length():
+    """One batch of scaled copies gives each focal length's fit, cost scaled by s^2."""
+    sc = scene(3, translation_ratio=5.0, rotation_deg=(2.0, 4.0))
+    members = [np.flatnonzero(sc.labels == b) for b in range(2)]
+    intrinsics = (600.0, 600.0) + CENTRE
+    W = np.array([[0.01, -0.02, 0.005], [-0.02, 0.01, 0.01]])
+    T = np.array([[0.3, 0.1, 1.0], [-0.5, 0.2, 1.0]])
+    scales = np.array([0.8, 1.0, 1.3])
+    got = general_profiles(sc.tracks, members, intrinsics, W, T, scales, iterations=4)
+    for i, s in enumerate(scales):
+        obs = LineObservations(sc.tracks, (600.0 * s, 600.0 * s) + CENTRE)
+        want = fit_bodies(obs, members, W, T, 4)[2]
+        np.testing.assert_allclose(got[i], want, rtol=1e-6)
+
+
+def test_translating_bodies_give_the_general_models_evidence():
+    """Bodies that translate and rotate: no rotation-model evidence, the general model's is."""
+    z = []
+    for seed in range(4):
+        sc = scene(seed, translation_ratio=5.0, rotation_deg=(2.0, 4.0))
+        res = segment_lines(sc.tracks, 2, intrinsics=(700.0, 700.0) + CENTRE, image_size=SIZE,
+                            method='general', init_labels=sc.labels)
+        noise = res.diagnostics.sigma_px ** 2
+        assert math.isinf(focal_evidence(sc.tracks, res.labels, 2, CENTRE, 700.0,
+                                         noise_var=noise).log_sigma)
+        ev = focal_evidence(sc.tracks, res.labels, 2, CENTRE, 700.0, noise_var=noise,
+                            motions=result_motions(res))
+        assert 0.0 < ev.log_sigma < 0.15
+        z.append(math.log(ev.focal / F_TRUE) / ev.log_sigma)
+        # one body alone does not count (its profile can lean far off unchecked)
+        alone = np.where(res.labels == 1, -1, res.labels)
+        assert math.isinf(focal_evidence(sc.tracks, alone, 2, CENTRE, 700.0, noise_var=noise,
+                                         motions=result_motions(res)).log_sigma)
+    assert np.all(np.abs(z) < 3.0), z
+
+
+def test_the_estimate_needs_several_informative_windows():
+    """One sharp window among vague ones does not make f observable (it may lean far off)."""
+    est = FocalEstimate(400.0)
+    for f in (420.0, 380.0, 410.0):
+        est.add(FocalEvidence(f, 0.5))
+    est.add(FocalEvidence(240.0, 0.01))
+    assert est.n_windows == 4 and est.focal == pytest.approx(240.0, rel=0.02)
+    assert est.log_sigma == pytest.approx(FOCAL_PRIOR_LOG_SIGMA) and not est.observable
+    est.add(FocalEvidence(245.0, 0.01))
+    est.add(FocalEvidence(238.0, 0.01))
+    assert est.observable

@@ -26,7 +26,9 @@ The first-order estimate is then refined exactly: the profile of the Mahalanobis
 exact known-f model over ``f`` with the labels fixed.
 
 Online (a stream without calibration): every window gives evidence on ``ln f``, the minimum of
-its profile and the profile's curvature there (:func:`focal_evidence`), and
+its profile and the profile's curvature there (:func:`focal_evidence`; a body that translates,
+which biases the rotation model's profile, by the general model's, :func:`general_profiles`),
+and
 :class:`FocalEstimate` combines the windows' evidence with a broad prior (inverse-variance
 weights, inflated when the windows disagree beyond their own spread).
 """
@@ -35,10 +37,12 @@ from dataclasses import dataclass
 from functools import lru_cache
 import math
 from math import comb
-from typing import Callable, Deque, Dict, Optional, Tuple
+from typing import Callable, Deque, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .general.fit import fit_bodies as fit_general_bodies
+from .general.model import LineObservations
 from .gpca import balance_scale, multibody_vector
 from .lines import line_flows
 from .models import fit_bodies, track_costs
@@ -158,10 +162,11 @@ def refine_focal(cost: Callable[[float], float], f0: float, span: float = 3.0,
 
 #: Standard deviation of ``ln f`` below which the focal length counts as observable (10%).
 FOCAL_OBSERVABLE = 0.1
-#: Windows with evidence an estimate needs to count as observable (below, its spread is at
-#: least twice :data:`FOCAL_OBSERVABLE`): their disagreement (the Birge ratio) means little
-#: with fewer.
+#: Windows with evidence an estimate needs to count as observable (below, its spread is the
+#: prior's): their disagreement (the Birge ratio) means little with fewer.
 FOCAL_MIN_WINDOWS = 3
+#: A window counts towards :data:`FOCAL_MIN_WINDOWS` when its own spread is within this.
+FOCAL_WINDOW_INFORMATIVE = 0.3
 #: Standard deviation of ``ln f`` of the prior (a factor 2): the start value is one window's
 #: estimate, so f stays within a plausible range however little the scene tells.
 FOCAL_PRIOR_LOG_SIGMA = math.log(2.0)
@@ -175,6 +180,25 @@ FOCAL_EVIDENCE_SPAN = 2.0
 FOCAL_MISFIT = 4.0
 #: Points of the coarse log grid over ``f0 / span .. f0 * span``.
 _GRID = 13
+#: LM steps of each general-model fit of a focal-length profile (:func:`general_profiles`).
+GENERAL_PROFILE_ITERATIONS = 8
+#: Points of the general model's log grid (each a lockstep LM run per body).
+_GENERAL_GRID = 9
+#: Usable tracks a body needs to give general-model evidence.
+GENERAL_PROFILE_LINES = 8
+#: A general-model profile must rise by this many times its noise (px^2) from its minimum to
+#: either end of the grid to give evidence.
+GENERAL_PROFILE_RISE = 9.0
+#: Factor on the variance of a general-model estimate: on bench focal's spinning boxes the
+#: windows' estimates scattered 4-5x the spread of their profiles (median |z| 4.1 over 40
+#: windows of five render seeds; the profile's minimum leans towards the f the window was
+#: solved at, whose labels and motions it starts from).
+GENERAL_PROFILE_INFLATION = 25.0
+#: Bodies of a window that must give general-model estimates for any to count (pooled, their
+#: disagreement widens the spread): one body's profile alone can lean far off (visp_cube's
+#: sheet, uncalibrated, its principal point taken at the image centre: 239 px +-20% and
+#: 1,518 px +-10% for 548 from two start frames).
+GENERAL_PROFILE_BODIES = 2
 #: Step in ``ln f`` of the three-point refinement about each body's grid minimum (5%, well
 #: within a profile's quadratic range).
 _CURVATURE_STEP = 0.05
@@ -225,9 +249,10 @@ def body_profiles(tracks: np.ndarray, labels: np.ndarray, n: int,
 def focal_evidence(tracks: np.ndarray, labels: np.ndarray, n: int,
                    centre: Tuple[float, float], f0: float,
                    span: float = FOCAL_EVIDENCE_SPAN,
-                   noise_var: Optional[float] = None) -> FocalEvidence:
+                   noise_var: Optional[float] = None,
+                   motions: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> FocalEvidence:
     """
-    Return the focal-length evidence of a window, its labels held (the rotation model).
+    Return the focal-length evidence of a window, its labels held.
 
     Parameters
     ----------
@@ -246,6 +271,10 @@ def focal_evidence(tracks: np.ndarray, labels: np.ndarray, n: int,
     noise_var : float, optional
         The endpoint noise variance px^2 of the model that made ``labels`` (the solve's
         ``sigma_px`` squared); None: no body is left out for its misfit.
+    motions : (W (n, 3), T (n, 3)), optional
+        The bodies' motions under the general model at ``f0`` (rad per frame): a body the
+        rotation model misfits then gives the general model's evidence instead
+        (:func:`general_profiles`).
 
     Notes
     -----
@@ -257,11 +286,13 @@ def focal_evidence(tracks: np.ndarray, labels: np.ndarray, n: int,
     minimum is at the grid's edge bounds f on one side only: no evidence from either. A
     body that translates relative to the camera biases its minimum (the rotation model does
     not explain its flow): one whose noise exceeds ``noise_var`` by more than
-    :data:`FOCAL_MISFIT` is left out. The bodies' estimates are combined with inverse-variance
-    weights, the variance multiplied by their Birge ratio when they disagree beyond their
-    spread. Bodies that translate alike under a model that cannot tell (``robust``: its own
-    noise is the rotation model's) go unseen: a bias left over shows only as disagreement
-    between windows, which widens the combined spread (:class:`FocalEstimate`).
+    :data:`FOCAL_MISFIT` is left out, or with ``motions`` gives the general model's evidence
+    instead (:func:`_general_estimates`), counted where at least
+    :data:`GENERAL_PROFILE_BODIES` bodies give it. The bodies' estimates are combined with
+    inverse-variance weights, the variance multiplied by their Birge ratio when they disagree
+    beyond their spread. Bodies that translate alike under a model that cannot tell
+    (``robust``: its own noise is the rotation model's) go unseen: a bias left over shows only
+    as disagreement between windows, which widens the combined spread (:class:`FocalEstimate`).
 
     """
     lab = np.asarray(labels)
@@ -270,8 +301,11 @@ def focal_evidence(tracks: np.ndarray, labels: np.ndarray, n: int,
     k = np.argmin(costs, axis=0)
     h = _CURVATURE_STEP
     xs, variances = [], []
+    # a body the rotation model misfits (it translates relative to the camera) at its best f
+    limit = FOCAL_MISFIT * noise_var if noise_var is not None and noise_var > 0 else np.inf
+    misfit = (dof > 0) & (costs[k, np.arange(n)] / np.where(dof > 0, dof, 1.0) > limit)
     near: Dict[int, np.ndarray] = {}      # grid minimum -> every body's costs 5% either side
-    for b in np.flatnonzero((k > 0) & (k < _GRID - 1) & (dof > 0)):
+    for b in np.flatnonzero((k > 0) & (k < _GRID - 1) & (dof > 0) & ~misfit):
         x = grid[k[b]]
         if k[b] not in near:
             near[k[b]] = body_profiles(tracks, lab, n, centre,
@@ -284,10 +318,91 @@ def focal_evidence(tracks: np.ndarray, labels: np.ndarray, n: int,
             continue
         xs.append(x + float(np.clip((c_lo - c_hi) / (2.0 * h * curvature), -2 * h, 2 * h)))
         variances.append(2.0 * noise / curvature)
+    if motions is not None and np.any(misfit):
+        more = _general_estimates(tracks, lab, np.flatnonzero(misfit).tolist(),
+                                  (f0, f0) + tuple(centre), motions, span)
+        if len(more[0]) >= GENERAL_PROFILE_BODIES:
+            xs, variances = xs + more[0], variances + more[1]
     if not xs:
         return FocalEvidence(f0, math.inf)
     mean, var = pooled(np.array(xs), 1.0 / np.array(variances))
     return FocalEvidence(math.exp(mean), math.sqrt(var))
+
+
+def general_profiles(tracks: np.ndarray, members: Sequence[np.ndarray],
+                     intrinsics: Tuple[float, float, float, float], W: np.ndarray,
+                     T: np.ndarray, scales: np.ndarray,
+                     iterations: int = GENERAL_PROFILE_ITERATIONS) -> np.ndarray:
+    """
+    Return every body's cost ``(F, B)`` under the general model at focal lengths ``f s``.
+
+    ``tracks (N, K, 4)`` px; ``members``: each body's track indices (at least 3 each);
+    ``intrinsics``: ``(fx, fy, cx, cy)`` px, ``f`` their ``fx`` (``fy`` scaled alike);
+    ``W, T (B, 3)``: the bodies' motions at ``f`` (rad per frame; T's direction counts);
+    ``scales (F,)``: the factors of ``f``. Each cost is the fitted-direction cost
+    (:func:`.general.line_residuals`, px^2 for 1 px of endpoint noise, summed over the
+    body's tracks) of ``iterations`` LM steps from ``(W, T)``.
+
+    Every focal length and body is one run of one lockstep batch: a line's normals at focal
+    length ``f s`` are its normals at ``f`` with the image scaled by ``1 / s`` about the
+    principal point, whose endpoint noise is then ``1 / s`` px, so the cost at ``f s`` is
+    ``s^2`` times that of the scaled tracks at ``f``.
+    """
+    fx, fy, cx, cy = intrinsics
+    centre = np.array([cx, cy, cx, cy])
+    scales = np.asarray(scales, dtype=float)
+    stacked = np.concatenate([centre + (tracks - centre) / s for s in scales])
+    obs = LineObservations(stacked, (fx, fy, cx, cy))
+    n = tracks.shape[0]
+    runs = [np.asarray(m) + i * n for i in range(len(scales)) for m in members]
+    B = len(members)
+    _, _, cost = fit_general_bodies(obs, runs, np.tile(W, (len(scales), 1)),
+                                    np.tile(T, (len(scales), 1)), iterations)
+    return cost.reshape(len(scales), B) * scales[:, None] ** 2
+
+
+def _general_estimates(tracks: np.ndarray, labels: np.ndarray, bodies: Sequence[int],
+                       intrinsics: Tuple[float, float, float, float],
+                       motions: Tuple[np.ndarray, np.ndarray], span: float
+                       ) -> Tuple[list, list]:
+    """
+    Return the estimates of ``ln f`` and their variances from the general model's profiles.
+
+    Of the bodies ``bodies`` (their motions ``motions = (W, T)`` at ``intrinsics``, whose
+    ``fx`` is ``f``), each with at least :data:`GENERAL_PROFILE_LINES` usable tracks: its
+    profile (:func:`general_profiles`) on the log grid over ``f / span .. f * span``, a
+    parabola through its minimum and the two grid points about it; a body whose profile
+    rises less than :data:`GENERAL_PROFILE_RISE` times its noise at either end of the grid
+    gives none (a profile that shallow is the LM's noise as much as the data's).
+    """
+    W, T = motions
+    lab = np.asarray(labels)
+    ok = np.isfinite(tracks[..., 0])
+    dof_track = np.maximum(2.0 * ok.sum(axis=1) - 4.0, 0.0)
+    members = {b: np.flatnonzero((lab == b) & (dof_track > 0)) for b in bodies}
+    used = [b for b in bodies if members[b].size >= GENERAL_PROFILE_LINES
+            and np.all(np.isfinite(W[b])) and np.all(np.isfinite(T[b]))]
+    if len(used) < GENERAL_PROFILE_BODIES:          # too few to count: not worth the fits
+        return [], []
+    grid = np.linspace(-math.log(span), math.log(span), _GENERAL_GRID)
+    costs = general_profiles(tracks, [members[b] for b in used], intrinsics, W[used], T[used],
+                             np.exp(grid))
+    h = grid[1] - grid[0]
+    xs, variances = [], []
+    for i, b in enumerate(used):                                 # bodies, not lines
+        c = costs[:, i]
+        k = int(np.argmin(c))
+        dof = dof_track[members[b]].sum() - 5.0
+        if not (0 < k < _GENERAL_GRID - 1 and dof > 0 and c[k] > 0):
+            continue
+        noise = c[k] / dof
+        curvature = (c[k - 1] - 2.0 * c[k] + c[k + 1]) / h ** 2
+        if not (curvature > 0 and min(c[0], c[-1]) - c[k] >= GENERAL_PROFILE_RISE * noise):
+            continue
+        xs.append(math.log(intrinsics[0]) + grid[k]
+                  + float(np.clip((c[k - 1] - c[k + 1]) / (2.0 * h * curvature), -h, h)))
+        variances.append(GENERAL_PROFILE_INFLATION * 2.0 * noise / curvature)
+    return xs, variances
 
 
 def pooled(x: np.ndarray, w: np.ndarray, prior: Tuple[float, float] = (0.0, 0.0)
@@ -317,8 +432,9 @@ class FocalEstimate:
     count the same frames twice), combined in ``ln f`` with inverse-variance weights. When the
     windows disagree beyond their own spread (the Birge ratio ``r^2`` of their chi-square over
     ``k - 1`` degrees of freedom exceeds 1: bodies that translate, wrong labels) the combined
-    variance is multiplied by ``r^2``; it never exceeds the prior's, and stays at least
-    twice :data:`FOCAL_OBSERVABLE` until :data:`FOCAL_MIN_WINDOWS` windows gave evidence.
+    variance is multiplied by ``r^2``; it never exceeds the prior's, and stays the prior's
+    until :data:`FOCAL_MIN_WINDOWS` windows each gave evidence within
+    :data:`FOCAL_WINDOW_INFORMATIVE`.
     """
 
     def __init__(self, f_start: float, prior_log_sigma: float = FOCAL_PRIOR_LOG_SIGMA,
@@ -348,5 +464,9 @@ class FocalEstimate:
                            np.array([e.log_sigma ** -2 for e in ev]), (x0, s0 ** -2))
         self.focal = math.exp(mean)
         self.log_sigma = min(math.sqrt(var), s0)
-        if len(ev) < FOCAL_MIN_WINDOWS:         # too few windows to check each other
-            self.log_sigma = max(self.log_sigma, 2.0 * FOCAL_OBSERVABLE)
+        # too few windows that each know f to check each other: the prior's spread (a few
+        # sharp windows can lean far off together: visp_cube's sheet alone, uncalibrated,
+        # 238 px +-1% for 548; from frame 20 1,476 px with a spread of 20% at a floor of
+        # 2 FOCAL_OBSERVABLE)
+        if sum(e.log_sigma <= FOCAL_WINDOW_INFORMATIVE for e in ev) < FOCAL_MIN_WINDOWS:
+            self.log_sigma = max(self.log_sigma, s0)
