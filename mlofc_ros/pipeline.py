@@ -907,8 +907,9 @@ class Pipeline:
         the estimate the evidence of its window (:func:`focal_evidence`, the solve's labels
         held) when the window is full and shares no frame with the last window that did, and
         when its model has translations (``general``): only then does its noise tell the
-        bodies that rotate about the camera from those that translate (whose evidence would
-        be biased). A rotation-only method's estimate stays at its start, not observable.
+        bodies that rotate about the camera from those that translate, which give the general
+        model's profile instead of the rotation model's (biased for them). A rotation-only
+        method's estimate stays at its start, not observable.
         """
         # not from an image of another size than the tracker's now: solved late (the node's
         # solver worker) it would estimate f for the new size (a solve side in another
