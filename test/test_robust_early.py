@@ -40,8 +40,11 @@ def test_a_clear_first_start_is_accepted_alone_with_the_full_search_result(monke
         full = segment_lines(sc.tracks, 3, intrinsics=sc.intrinsics, seed=0)
         assert not full.diagnostics.early_accept
         assert len(full.diagnostics.candidate_costs) == 3
-        assert np.array_equal(res.labels, full.labels)
-        assert np.allclose(res.angular_velocities, full.angular_velocities, atol=1e-12)
+        # the same bodies; their order may differ (the last bits of the starts' scores)
+        perm, errors = best_permutation(res.labels, full.labels, 3)
+        assert errors == 0 and sorted(perm) == [0, 1, 2]
+        assert np.allclose(np.asarray(res.angular_velocities),
+                           np.asarray(full.angular_velocities)[list(perm)], atol=1e-12)
 
 
 def test_two_frames_have_no_reference_noise_and_search_everything():
