@@ -301,7 +301,8 @@ def focal_evidence(tracks: np.ndarray, labels: np.ndarray, n: int,
     k = np.argmin(costs, axis=0)
     h = _CURVATURE_STEP
     xs, variances = [], []
-    # a body the rotation model misfits (it translates relative to the camera) at its best f
+    # a body the rotation model misfits (it translates relative to the camera) at its best f,
+    # the middle of its three points below
     limit = FOCAL_MISFIT * noise_var if noise_var is not None and noise_var > 0 else np.inf
     misfit = (dof > 0) & (costs[k, np.arange(n)] / np.where(dof > 0, dof, 1.0) > limit)
     near: Dict[int, np.ndarray] = {}      # grid minimum -> every body's costs 5% either side
@@ -313,8 +314,7 @@ def focal_evidence(tracks: np.ndarray, labels: np.ndarray, n: int,
         c_lo, c_mid, c_hi = near[k[b]][:, b]
         curvature = (c_lo - 2.0 * c_mid + c_hi) / h ** 2
         noise = c_mid / dof[b]
-        if not (curvature > 0 and c_mid > 0) or (
-                noise_var is not None and noise_var > 0 and noise > FOCAL_MISFIT * noise_var):
+        if not (curvature > 0 and c_mid > 0):
             continue
         xs.append(x + float(np.clip((c_lo - c_hi) / (2.0 * h * curvature), -2 * h, 2 * h)))
         variances.append(2.0 * noise / curvature)
