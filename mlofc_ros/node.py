@@ -190,6 +190,9 @@ class MlofcNode(Node):
         self._queue: Deque[List[Any]] = deque()
         self._unpassed = 0      # frames received, not given to the pipeline since the last one
         self._pending: Dict[str, Any] = {}
+        # method 'auto' moved to a slow method in a solve: place the solver anew (tracking
+        # worker, the solver idle), as after a change of method
+        self._move_solver = False
         self._camera: Optional[CameraModel] = None
         self._camera_size: Optional[Tuple[int, int]] = None
         self._last_warn: Dict[str, float] = {}
@@ -399,6 +402,7 @@ class MlofcNode(Node):
             'focal length (px)': f'{r.focal_length:.1f}' if r is not None else 'nan',
             'focal length': focal_text(r),
             'solver': 'thread' if remote is None else f'child process {remote.pid}',
+            'solver method': self._method,
             'last problem': problem[1] if problem is not None else 'none',
             'last problem age (s)': f'{now - problem[0]:.1f}' if problem is not None else '',
         }
@@ -419,15 +423,16 @@ class MlofcNode(Node):
                     return
                 item = self._queue.popleft()
                 pending, self._pending = self._pending, {}
+                move, self._move_solver = self._move_solver, False
                 debug = self._values['publish_debug_image']
-                if pending:
+                if pending or move:
                     # the solver must not run during a reconfiguration: let it finish what it
                     # has (a window of the old settings), then change both halves at once
                     while (self._observed is not None or self._solving) and \
                             not self._stop.is_set():
                         self._solve_wake.wait(0.2)
             try:
-                if pending:
+                if pending or move:
                     self._reconfigure(pending)
                 self._observe(*item, debug=debug)
             except Exception as exc:  # noqa: B902 (the worker must survive anything)
@@ -449,11 +454,12 @@ class MlofcNode(Node):
         ``changes``: the pipeline parameters just applied here, for the child too. Moving the
         solve side (a child started or closed) restarts the body ids: the state stays behind.
         """
-        wanted = (self._values['solver_process']
-                  and get_method(self._pipeline.params['method']).slow)
+        self._method = self._pipeline.method
+        wanted = self._values['solver_process'] and get_method(self._method).slow
         if wanted and self._remote is None:
             try:
-                self._remote = SolveProcess(self._pipeline.params)
+                # the method the pipeline solves with now ('auto' stays with it in the child)
+                self._remote = SolveProcess(dict(self._pipeline.params, method=self._method))
             except OSError as exc:
                 self.get_logger().error(f'cannot start the solver process ({exc}): solving '
                                         'in the node process')
@@ -511,7 +517,7 @@ class MlofcNode(Node):
             # always runs in its own worker
             inline = (self._observed is None and not self._solving
                       and self._last_solve_s < INLINE_SOLVE_S
-                      and not get_method(self._pipeline.params['method']).slow)
+                      and not get_method(self._pipeline.method).slow)
             older = in_solve = None
             if inline:
                 self._solving = True
@@ -604,6 +610,8 @@ class MlofcNode(Node):
             self._warn('pipeline', result.problem)
         self.last_result = result           # before publishing: a subscriber may look at it
         self._log_focal(result)
+        if remote is None and self._pipeline.method != self._method:
+            self._method_chosen()
         if result.from_running_fit:
             # the solver answered from the running fit (a step that did not hold while a full
             # solve runs beside it): not processed but unsolved, its cloud a carried one
@@ -634,6 +642,17 @@ class MlofcNode(Node):
             bgr = draw_debug(gray, r.segments, r.labels, r.track_ids, r.angular_velocities,
                              r.body_valid)
             self._debug_pub.publish(debug_image_msg(header, bgr))
+
+    def _method_chosen(self) -> None:
+        """Say that method 'auto' moved to the general model, and place the solver anew."""
+        choice = self._pipeline.method_choice
+        self.get_logger().info(
+            f'method auto: the rotation model misfits the scene (its noise {choice.ratio:.1f}x '
+            "the tracks' jitter: bodies translate relative to the camera); solving with "
+            f'{self._pipeline.method} from now on')
+        with self._lock:
+            self._move_solver = True
+            self._method = self._pipeline.method    # said once
 
     def _log_focal(self, r: FrameResult) -> None:
         """Log once when the focal length becomes observable or not (estimated only)."""

@@ -87,7 +87,7 @@ class ParamSpec:
     def allowed_choices(self) -> Optional[Tuple[str, ...]]:
         """Return the allowed strings, or None when any string is allowed."""
         if self.name == 'method':
-            return solver_methods()
+            return solver_methods() + ('auto',)
         return self.choices
 
 
@@ -101,11 +101,13 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               range=(0, 8)),
     ParamSpec('window', int, 0,
               'Sliding window length in frames; the solver runs on the last `window` frames at '
-              "every frame. 0 = the method's own: 10 for general (a translation needs them), "
-              '5 for the others.',
+              "every frame. 0 = the method's own: 10 for general and auto (a translation needs "
+              'them), 5 for the others.',
               range=(0, 30)),
     ParamSpec('method', str, 'robust',
-              'Solver method (one of mlofc_ros.solver.METHODS).'),
+              'Solver method (one of mlofc_ros.solver.METHODS), or auto: robust until its '
+              'rotation model misfits the scene (bodies translate relative to the camera), '
+              'then general for good (mlofc_ros.method_choice).'),
     ParamSpec('min_segment_length', float, 20.0,
               'Shortest line segment detected and tracked, in pixels.',
               range=(2.0, 10000.0)),

@@ -43,6 +43,7 @@ from mlofc_ros.frame import (centred_intrinsics, check_image_size, check_lines, 
                              invalid_bodies, lookup, Observation, ray_intrinsics, segment_rays,
                              TIMING_KEYS, unsolved_fields)
 from mlofc_ros.lane import Finished, SolveJob
+from mlofc_ros.method_choice import AUTO, MethodChoice, TRANSLATION_METHOD
 from mlofc_ros.solver import get_method, Method, segment_lines, SegmentationResult, StepNotTaken
 from mlofc_ros.solver.focal import focal_evidence, FOCAL_PRIOR_LOG_SIGMA, FocalEstimate
 from mlofc_ros.solver.warm import result_motions, WarmStarts
@@ -95,9 +96,16 @@ def window_frames(params: Mapping[str, Any]) -> int:
     Return the sliding window's length (frames) that ``params`` ask for.
 
     ``params['window']``, or when it is 0 the window of ``params['method']``
-    (:attr:`.Method.window`: 10 for 'general', 5 for the others).
+    (:attr:`.Method.window`: 10 for 'general', 5 for the others; 'auto' the general model's,
+    which it may move to, its rotation-model solves on the last 5).
     """
-    return int(params['window']) or get_method(params['method']).window
+    return int(params['window']) or get_method(_declared_method(params)).window
+
+
+def _declared_method(params: Mapping[str, Any]) -> str:
+    """Return the method whose window ``method`` asks for: 'auto' the one it may move to."""
+    method = params['method']
+    return TRANSLATION_METHOD if method == AUTO else method
 
 
 class Pipeline:
@@ -160,6 +168,9 @@ class Pipeline:
         self._lane: Any = None
         self._generation = 0
         self._from_running_fit = False
+        # method='auto': the method it solves with now (the rotation model until the scene
+        # translates)
+        self._choice = MethodChoice()
 
     # --- configuration -------------------------------------------------------------------
 
@@ -167,7 +178,8 @@ class Pipeline:
         """
         Change parameters at run time; resets only what the change invalidates.
 
-        ``window`` restarts the window; ``num_bodies`` restarts body numbering;
+        ``window`` restarts the window; ``num_bodies`` restarts body numbering; ``method``
+        set to ``'auto'``, even again, starts its choice from the rotation model;
         ``min_segment_length`` restarts the tracker and the window; ``detect_every``,
         ``detect_every_max``, ``detect_regions``, ``detector_backend``, ``detector_scale``
         and ``bridge_crossings`` change only the detection (tracks carry on). Raises like the
@@ -196,6 +208,8 @@ class Pipeline:
             self._reset_bodies()
         if changed & {'num_bodies', 'min_segment_length'}:
             self._running = None
+        if 'method' in changed or new.get('method') == AUTO:
+            self._choice.reset()            # 'auto' set (again) starts from the rotation model
 
     def reset(self) -> None:
         """
@@ -214,6 +228,7 @@ class Pipeline:
         self._pending_resets = set()
         self._source = None
         self._running = None
+        self._choice.reset()
 
     def _reset_bodies(self) -> None:
         """Restart body numbering: stable ids, warm starts, the automatic count."""
@@ -252,6 +267,23 @@ class Pipeline:
     def window_size(self) -> int:
         """Frames the window holds when full: ``window``, or the method's own when it is 0."""
         return self._window.size
+
+    @property
+    def method(self) -> str:
+        """
+        Return the solver method the solves use now: ``method``, or what 'auto' chose.
+
+        ``'auto'`` solves with the rotation model (``'robust'``) until it misfits the scene,
+        then with ``'general'`` (:mod:`mlofc_ros.method_choice`); a caller that places slow
+        methods elsewhere (the node: a child process) looks here after every solve.
+        """
+        method = self.params['method']
+        return self._choice.method if method == AUTO else method
+
+    @property
+    def method_choice(self) -> MethodChoice:
+        """Return what 'auto' decided and why (:class:`~.method_choice.MethodChoice`)."""
+        return self._choice
 
     @property
     def n_bodies(self) -> int:
@@ -695,8 +727,11 @@ class Pipeline:
             problems.append('no line tracks in the window')
             return None
         n_req = int(self.params['num_bodies'])
-        method = get_method(self.params['method']).for_window(obs.window_fill,
-                                                              self._window.size)
+        auto = self.params['method'] == AUTO
+        method = get_method(self.method).for_window(obs.window_fill, self._window.size)
+        tracks = obs.win_tracks
+        if auto and int(self.params['window']) == 0:
+            tracks = tracks[:, -method.window:]     # 'auto' keeps the general model's window
 
         # the solver's keywords for this window, warm starts aside
         common = {'intrinsics': obs.intrinsics, 'image_size': obs.image_size,
@@ -704,7 +739,7 @@ class Pipeline:
 
         def solve(n: int, labels: Optional[np.ndarray],
                   ids: Optional[Sequence[int]] = None) -> SegmentationResult:
-            return segment_lines(obs.win_tracks, n, **common,
+            return segment_lines(tracks, n, **common,
                                  **self._warm.keywords(method, labels, n, ids))
 
         def counted(n: int, labels: Optional[np.ndarray],
@@ -727,7 +762,7 @@ class Pipeline:
                 if self._counted_ids is not None and len(self._counted_ids) == self._count.n:
                     previous = compact_labels(self.bodies.previous_labels(obs.win_ids),
                                               self._counted_ids)
-                res = self._count.solve(obs.win_tracks, previous, counted)
+                res = self._count.solve(tracks, previous, counted)
         except (ValueError, NotImplementedError) as exc:
             problems.append(f'solver: {exc}')
             return None
@@ -735,6 +770,9 @@ class Pipeline:
             problems.append(f'solver failed: {type(exc).__name__}: {exc}')
             return None
         self._warm.solved(method, res, obs.stamp, obs.frame_interval)
+        if (auto and method.name == self._choice.method
+                and tracks.shape[1] >= min(method.window, self._window.size)):
+            self._choice.add(res.diagnostics.sigma_px, tracks)
         return res
 
     def _step_beside_lane(self, obs: Observation, method: Method, n: int, lane: Any,

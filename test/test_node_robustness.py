@@ -603,6 +603,38 @@ def test_a_slow_method_solves_in_a_child_process_and_moves_back_on_a_method_chan
     assert not h.warnings('failed'), h.warnings('failed')
 
 
+def test_method_auto_moves_to_the_general_model_in_a_child_once_bodies_translate(harness):
+    from mlofc_tools.render import render_sequence
+    seq = render_sequence(n_boxes=2, n_frames=14, size=(640, 480), motion='own_centre',
+                          seed=0)
+    h = harness('/rob_auto', method='auto', num_bodies=3, warn_period=0.0,
+                focal_length=float(seq.camera.fx))
+    diag = h.collect(DiagnosticArray, '/diagnostics')
+    name = 'rob_auto/mlofc: pipeline'
+
+    def status(key: str) -> str:
+        got = statuses(diag, name)
+        return {v.key: v.value for v in got[-1].values}[key] if got else ''
+    assert h.wait(lambda: status('solver method') == 'robust', 5.0), status('solver method')
+    assert status('solver') == 'thread' and status('window fill') == '0/10'
+    clouds = [parse_segments_msg(h.frame(image_msg(seq.frames[k], seq.stamps[k])))[2]
+              for k in range(len(seq.frames))]
+    # the rotation model misfits the boxes: after a few full windows, the general model in a
+    # child process; the parameter stays 'auto'
+    assert h.wait(lambda: bool(h.infos('method auto: the rotation model misfits')))
+    assert h.wait(lambda: status('solver method') == 'general', 5.0)
+    assert h.wait(lambda: status('solver').startswith('child process '), 5.0)
+    assert h.mlofc.get_parameter('method').value == 'auto'
+    s = h.mlofc.stats
+    assert s['processed'] + s['unsolved'] == len(seq.frames) and s['errors'] == 0, s
+    assert np.sum(clouds[3] >= 0) > 10               # the rotation model's, before
+    # set again, 'auto' starts from the rotation model, solved here
+    assert h.set_params(method='auto')[0].successful
+    h.frame(image_msg(seq.frames[0], seq.stamps[-1] + 1.0))
+    assert h.wait(lambda: status('solver') == 'thread', 5.0), status('solver')
+    assert status('solver method') == 'robust'
+
+
 def test_a_solver_process_that_keeps_dying_is_given_up_for_a_thread(harness):
     seq = small_sequence(12)
     h = harness('/rob_die', method='general', window=5, focal_length=300.0, warn_period=0.0)

@@ -48,8 +48,9 @@ def test_every_default_is_valid_and_every_entry_is_documented():
 
 
 def test_method_choices_come_from_the_solver():
-    assert params.PARAMS['method'].allowed_choices() == tuple(METHODS)
-    for m in METHODS:
+    # and 'auto', which the pipeline resolves to one of them (mlofc_ros.method_choice)
+    assert params.PARAMS['method'].allowed_choices() == tuple(METHODS) + ('auto',)
+    for m in METHODS + ('auto',):
         assert params.validate('method', m) is None
     reason = params.validate('method', 'magic')
     assert 'magic' in reason and 'robust' in reason

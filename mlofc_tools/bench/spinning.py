@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """
-Spinning boxes through the whole pipeline: rotation-only ('robust') vs 'general'.
+Spinning boxes through the whole pipeline: rotation-only ('robust'), 'general' and 'auto'.
 
 Run ``python -m mlofc_tools.bench spinning``; writes ``README.md`` and ``spinning.png`` to
 ``docs/results/spinning/``. Rendered boxes spinning about their own centres (``own_centre``, so
@@ -194,7 +194,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--scenes', type=scene_list, default=list(SCENES),
                    help=f'comma-separated scenes from {list(SCENES)}')
     p.add_argument('--methods', default='robust,general', help='comma-separated solver methods')
-    p.add_argument('--windows', default='5,10', help='comma-separated window lengths (frames)')
+    p.add_argument('--windows', default='5,10',
+                   help="comma-separated window lengths (frames); 0: the method's own")
     p.add_argument('--frames', type=int, default=30, help='frames per sequence (30 Hz)')
     p.add_argument('--seeds', default='0,1,2', help='comma-separated render seeds')
     common.add_param_option(p, 'num_bodies, window and method are')
@@ -313,7 +314,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
                  revision: Optional[str] = None) -> str:
     """Return the Markdown report; ``revision``: the commit at the start of the runs."""
     head = common.run_header(
-        'Spinning boxes through the pipeline: robust vs general',
+        'Spinning boxes through the pipeline: robust, general and auto',
         common.command_line('spinning', argv),
         {'Sequences': f'{args.frames} frames 640x480 at 30 Hz, 60-150 deg/s per box at depths '
                       '4-8 (wide scenes: 9-90 deg/s, depths 2-8), sensor noise 2 grey levels '
@@ -328,6 +329,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str],
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     import sys
+    from mlofc_ros.pipeline import window_frames
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse_args(argv)
     scenes = args.scenes
@@ -345,7 +347,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             for method in methods:
                 for window in windows:
                     outs = run_pipeline(seq, method, window, args.params)
-                    score = score_run(seq, outs, min(window - 1, args.frames - 1))
+                    size = window_frames({'window': window, 'method': method})
+                    score = score_run(seq, outs, min(size - 1, args.frames - 1))
                     score['lsd_ms'] = reference
                     records.append({'scene': scene, 'seed': seed, 'method': method,
                                     'window': window, 'score': score})

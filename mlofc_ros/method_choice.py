@@ -1,0 +1,150 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+The solver method of ``method='auto'``: the rotation model until bodies translate.
+
+A stream starts with ``'robust'`` (the paper's rotation about the camera centre, a few ms a
+window) and moves to ``'general'`` (a rotation and a translation per body, 5-10x the CPU) once
+the rotation model misfits the scene: its noise level (``Diagnostics.sigma_px``, the
+endpoint noise its inliers' residuals imply) against the tracks' own jitter
+(:func:`track_jitter`, which no motion model enters). Medians over 5-frame windows, with
+the 10th and 90th percentiles: where the rotation model holds the two are alike (rendered
+boxes that turn about the camera 1.3, 1.1-1.8; synthetic line tracks 0.04-1.1); boxes
+spinning about their own centres 4-8 m away give 15-47 (7-59), visp_cube's dragged sheet 2.7
+(1.2-5.1) and its still phase 1.4 (1.2-4.9), rubik_cube 2.4 (2.0-3.5), hamburg_taxi 1.5
+(1.4-1.7), and Hopkins155's line tracks (the camera and the objects translate) 1.1-3.2
+(their 90th percentiles 2.2-6.1). The switch is made when the median over
+:data:`MISFIT_SOLVES` full windows passes :data:`MISFIT_RATIO`, and it is not undone: a
+scene that translated once will again, and ``'general'`` fits rotations about the camera
+as well (a switch made where it was not needed costs CPU, not labels).
+
+Where it holds back: a stream whose bodies translate so that the rotation model still
+explains them within twice the tracks' jitter (hamburg_taxi's small distant cars) stays
+with the rotation model.
+"""
+from collections import deque
+from typing import Deque, Optional
+
+import numpy as np
+
+#: The parameter value that chooses the method from the scene.
+AUTO = 'auto'
+#: What ``'auto'`` solves with until the scene translates, and after.
+ROTATION_METHOD = 'robust'
+TRANSLATION_METHOD = 'general'
+#: The rotation model misfits when its noise level exceeds the tracks' jitter by this factor
+#: (in rms, median over :data:`MISFIT_SOLVES` windows): above the 1.1-1.8 of rotations
+#: about the camera, below the 7 and more of bodies that turn about their own centres.
+MISFIT_RATIO = 2.0
+#: Full windows whose median ratio decides (a few windows, so that one poorly tracked frame
+#: does not switch).
+MISFIT_SOLVES = 5
+#: Tracks seen in every frame of a window that :func:`track_jitter` needs.
+MIN_JITTER_TRACKS = 10
+#: Frames of a window :func:`track_jitter` needs: a quadratic in time takes 3, the rest is
+#: its residual.
+MIN_JITTER_FRAMES = 4
+
+
+def track_jitter(tracks: np.ndarray) -> float:
+    """
+    Return the tracks' endpoint jitter (px), whatever their motion: NaN with too few tracks.
+
+    Parameters
+    ----------
+    tracks : (N, K, 4) float
+        Endpoints ``(u1, v1, u2, v2)`` px over ``K`` frames, NaN where unseen.
+
+    Notes
+    -----
+    Every track seen in all ``K >= 4`` frames has its line's normal angle ``theta_k`` and its
+    offset ``rho_k`` (the normal's dot product with the midpoint, from the track's mean
+    midpoint) fitted by a quadratic in time.
+    Any smooth motion is about quadratic over a few frames; what is left is the tracking's
+    noise. An endpoint noise of ``s`` px across the line gives ``rho`` a noise of
+    ``s / sqrt(2)`` and ``theta`` one of ``s sqrt(2) / L`` (``L`` the line's length), so
+    ``sum r_rho^2 + sum (r_theta L / 2)^2`` over both fits has the expectation
+    ``(K - 3) s^2``. The median of the tracks' ``s^2`` is returned as ``s``.
+
+    """
+    tracks = np.asarray(tracks, dtype=float)
+    if tracks.ndim != 3 or tracks.shape[2] != 4:
+        raise ValueError(f'tracks must be (N, K, 4), got {tracks.shape}')
+    k = tracks.shape[1]
+    seen = np.all(np.isfinite(tracks), axis=(1, 2))
+    if k < MIN_JITTER_FRAMES or np.count_nonzero(seen) < MIN_JITTER_TRACKS:
+        return float('nan')
+    t = tracks[seen]
+    d = t[..., 2:] - t[..., :2]
+    length = np.linalg.norm(d, axis=-1)
+    if np.any(length <= 0):
+        t, d, length = (x[np.all(length > 0, axis=1)] for x in (t, d, length))
+        if len(t) < MIN_JITTER_TRACKS:
+            return float('nan')
+    normal = np.stack([-d[..., 1], d[..., 0]], axis=-1) / length[..., None]
+    # the normal's sign as in the first frame: the angle must not jump by pi
+    normal *= np.where(np.sum(normal * normal[:, :1], axis=-1) < 0, -1.0, 1.0)[..., None]
+    theta = np.unwrap(np.arctan2(normal[..., 1], normal[..., 0]), axis=1)
+    # the offset from the track's mean midpoint: from the image's corner, a line's turn would
+    # lever a far line's offset beyond a quadratic
+    mid = 0.5 * (t[..., :2] + t[..., 2:])
+    rho = np.sum(normal * (mid - mid.mean(axis=1, keepdims=True)), axis=-1)
+    time = np.arange(k) - 0.5 * (k - 1)
+    basis = np.stack([np.ones(k), time, time * time], axis=1)
+    residual = np.eye(k) - basis @ np.linalg.pinv(basis)       # (K, K), symmetric
+    r_rho = rho @ residual
+    r_theta = (theta @ residual) * (0.5 * length.mean(axis=1, keepdims=True))
+    s2 = (np.sum(r_rho ** 2, axis=1) + np.sum(r_theta ** 2, axis=1)) / (k - 3)
+    return float(np.sqrt(np.median(s2)))
+
+
+class MethodChoice:
+    """
+    The method ``'auto'`` solves with now, and when it moves to the general model.
+
+    Feed it every rotation-model solve of a full window (:meth:`add`); :attr:`method` is
+    :data:`ROTATION_METHOD` until the rotation model misfits, then
+    :data:`TRANSLATION_METHOD` for good (until :meth:`reset`).
+    """
+
+    def __init__(self) -> None:
+        self.method = ROTATION_METHOD
+        #: The median ratio that made the switch (None before).
+        self.ratio: Optional[float] = None
+        self._ratios: Deque[float] = deque(maxlen=MISFIT_SOLVES)
+
+    def reset(self) -> None:
+        """Start again from the rotation model."""
+        self.method, self.ratio = ROTATION_METHOD, None
+        self._ratios.clear()
+
+    def add(self, sigma_px: float, tracks: np.ndarray) -> bool:
+        """
+        Take a rotation-model solve: its noise level ``sigma_px`` and its window's ``tracks``.
+
+        ``tracks (N, K, 4)`` px as solved. Returns True when this solve made the switch.
+        """
+        if self.method != ROTATION_METHOD:
+            return False
+        jitter = track_jitter(tracks)
+        if not (np.isfinite(sigma_px) and np.isfinite(jitter) and jitter > 0):
+            return False
+        self._ratios.append(float(sigma_px) / jitter)
+        if len(self._ratios) < MISFIT_SOLVES:
+            return False
+        ratio = float(np.median(self._ratios))
+        if ratio <= MISFIT_RATIO:
+            return False
+        self.method, self.ratio = TRANSLATION_METHOD, ratio
+        return True

@@ -1,0 +1,121 @@
+# Copyright 2026 The mlofc_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""``method='auto'``: the tracks' jitter, the switch to the general model, the pipeline's use."""
+import math
+
+from mlofc_ros.method_choice import (MethodChoice, MISFIT_RATIO, MISFIT_SOLVES, track_jitter,
+                                     TRANSLATION_METHOD)
+from mlofc_ros.pipeline import Pipeline
+from mlofc_tools.scoring import misclassification
+import numpy as np
+import pytest
+from scenes import random_scene
+
+
+def moving_lines(n: int, k: int, noise: float, seed: int = 0) -> np.ndarray:
+    """``(n, k, 4)`` px: lines turning and sliding at constant rates, endpoint noise ``noise``."""
+    rng = np.random.default_rng(seed)
+    centre = rng.uniform(100, 900, (n, 1, 2))
+    half = rng.uniform(15, 60, (n, 1, 1))
+    # up to 1 deg and 2 px per frame: over 10 frames still about quadratic
+    angle = rng.uniform(0, np.pi, (n, 1)) + rng.uniform(-0.02, 0.02, (n, 1)) * np.arange(k)
+    centre = centre + rng.uniform(-2, 2, (n, 1, 2)) * np.arange(k)[None, :, None]
+    d = half * np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    tracks = np.concatenate([centre - d, centre + d], axis=-1)
+    return tracks + rng.normal(0.0, noise, tracks.shape)
+
+
+@pytest.mark.parametrize('k', [4, 5, 10])
+def test_the_jitter_is_the_endpoint_noise_whatever_the_smooth_motion(k):
+    for noise in (0.1, 0.5, 2.0):
+        jitter = track_jitter(moving_lines(400, k, noise, seed=k))
+        # the median of a chi-square over its dof is a little below 1
+        assert 0.8 * noise < jitter < 1.05 * noise, (noise, jitter)
+    assert track_jitter(moving_lines(400, k, 0.0)) < 0.02        # the motion leaves nothing
+
+
+def test_the_jitter_needs_tracks_seen_in_every_frame_and_four_frames():
+    tracks = moving_lines(40, 5, 0.5)
+    tracks[:31, 2] = np.nan                                       # 9 tracks seen throughout
+    assert math.isnan(track_jitter(tracks))
+    assert math.isnan(track_jitter(moving_lines(40, 3, 0.5)))
+    tracks = moving_lines(40, 5, 0.5)
+    tracks[:5, :, 2:] = tracks[:5, :, :2]                         # zero-length lines: left out
+    assert 0.4 < track_jitter(tracks) < 0.55
+    with pytest.raises(ValueError, match='must be'):
+        track_jitter(np.zeros((10, 5, 3)))
+
+
+def test_the_choice_moves_on_the_median_of_a_few_windows_and_for_good():
+    tracks = moving_lines(50, 5, 0.5)
+    jitter = track_jitter(tracks)
+    choice = MethodChoice()
+    high = 3.0 * MISFIT_RATIO * jitter
+    # one poor window among good ones: no switch
+    for sigma in [high] + [0.5 * jitter] * (2 * MISFIT_SOLVES):
+        assert not choice.add(sigma, tracks)
+    assert choice.method == 'robust' and choice.ratio is None
+    # NaN levels and too few tracks are not counted
+    assert not choice.add(math.nan, tracks) and not choice.add(high, tracks[:5])
+    switched = [choice.add(high, tracks) for _ in range(MISFIT_SOLVES)]
+    assert switched.index(True) == MISFIT_SOLVES // 2 and sum(switched) == 1
+    assert choice.method == TRANSLATION_METHOD and choice.ratio > MISFIT_RATIO
+    assert not choice.add(0.1 * jitter, tracks) and choice.method == TRANSLATION_METHOD
+    choice.reset()
+    assert choice.method == 'robust' and choice.ratio is None
+
+
+def stream(pipe: Pipeline, tracks: np.ndarray, intr) -> list:
+    ids = np.arange(tracks.shape[0])
+    return [pipe.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+            for k in range(tracks.shape[1])]
+
+
+def test_auto_keeps_the_rotation_model_where_bodies_rotate_about_the_camera():
+    tracks, truth, _, intr = random_scene(2, 25, n_frames=16, noise=0.2, seed=0)
+    pipe = Pipeline(num_bodies=2, method='auto')
+    assert pipe.window_size == 10                   # the general model's, should it move
+    results = stream(pipe, tracks, intr)
+    assert pipe.method == 'robust' and pipe.params['method'] == 'auto'
+    # its rotation-model solves are robust's on robust's own 5 frames
+    robust = stream(Pipeline(num_bodies=2, method='robust'), tracks, intr)
+    for a, b in zip(results, robust):
+        np.testing.assert_array_equal(a.labels, b.labels)
+        np.testing.assert_allclose(a.angular_velocities, b.angular_velocities, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_auto_moves_to_the_general_model_once_bodies_translate():
+    tracks, truth, _, intr = random_scene(2, 25, n_frames=20, noise=0.2, seed=3,
+                                          own_centre=True)
+    pipe = Pipeline(num_bodies=2, method='auto')
+    results, methods = [], []
+    ids = np.arange(tracks.shape[0])
+    for k in range(tracks.shape[1]):
+        results.append(pipe.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr))
+        methods.append(pipe.method)
+    # the first full 5-frame window is frame 4: MISFIT_SOLVES of them decide
+    first = methods.index('general')
+    assert first == 4 + MISFIT_SOLVES - 1, methods
+    assert pipe.method_choice.ratio > 3.0
+    assert misclassification(results[-1].labels, truth, 2) <= 0.05
+    # set again, 'auto' starts from the rotation model; other changes keep the choice; a
+    # reset starts it again too
+    pipe.reconfigure(detect_every=2, num_bodies=3)
+    assert pipe.method == 'general'
+    pipe.reconfigure(method='auto')
+    assert pipe.method == 'robust'
+    pipe.method_choice.method = 'general'
+    pipe.reset()
+    assert pipe.method == 'robust'
