@@ -104,5 +104,5 @@ def test_quick_stream_benchmark(tmp_path: pathlib.Path) -> None:
         hopkins_stream.parse_args(['--variants', 'both'])        # no variants any more
     assert hopkins_stream.main(['--quick', '--out', str(tmp_path)]) == 0
     text = (tmp_path / 'README.md').read_text()
-    assert '| 3 | 1 |' in text
-    assert '| three-cars | 3 | 15 |' in text
+    assert '| general | 3 | 1 |' in text
+    assert '| three-cars | general | 3 | 15 |' in text

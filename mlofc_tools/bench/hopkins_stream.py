@@ -14,7 +14,8 @@
 """
 Hopkins155 line tracks streamed through `general`'s warm path, as the node solves them.
 
-``python -m mlofc_tools.bench hopkins_stream [--motions 3] [--sequences ...] [--out DIR]``
+``python -m mlofc_tools.bench hopkins_stream [--motions 3] [--methods general,auto]
+[--sequences ...] [--out DIR]``
 writes ``README.md`` to ``docs/results/hopkins_stream/`` (or ``--out``), prints it
 (the 35 three-motion sequences by default, ~22 min on 2 cores).
 
@@ -23,18 +24,20 @@ window per frame, each warm-started from the previous window's labels and motion
 line tracks are built once, in the sequence's first frame
 (:func:`mlofc_tools.datasets.hopkins.line_tracks` with all frames, the same pairing rules as
 `bench hopkins`), and go frame by frame through
-:meth:`mlofc_ros.pipeline.Pipeline.process_lines` (``method='general'``, ``window`` K = 5,
-the node's other defaults): the node's own solve path, body ids and all. The first frames,
-until the window holds ``solver.methods.GENERAL_MIN_FRAMES``, are solved rotation-only; then
-the first full window is searched (from those labels too) and every later one is
-warm-started (from the previous labels and from every track reassigned at the previous
-motions, the lower score kept) with every body rescanned; focal length unknown, estimated
-per window until ``pipeline.FOCAL_SAMPLES`` estimates, then started at their median and
-refined from windows that share no frame (:class:`mlofc_ros.solver.focal.FocalEstimate`). Scored on
-the published labels of every full window (a line the solver leaves unassigned keeps its last
-body for ``label_memory`` frames, as the node publishes it; ``-1`` counts as wrong). Stamps
-are 30 frames/s (only the published rad/s depend on them). Reference on the same lines: the
-cold search (as `bench hopkins`, f unknown) at the middle and the last window.
+:meth:`mlofc_ros.pipeline.Pipeline.process_lines` (``method='general'``, or each of
+``--methods``; ``window`` K = 5, the node's other defaults): the node's own solve path, body
+ids and all. The first frames, until the window holds ``solver.methods.GENERAL_MIN_FRAMES``,
+are solved rotation-only; then the first full window is searched (from those labels too) and
+every later one is warm-started (from the previous labels and from every track reassigned at
+the previous motions, the lower score kept) with every body rescanned; focal length unknown,
+estimated per window until ``pipeline.FOCAL_SAMPLES`` estimates, then started at their median
+and refined from windows that share no frame (:class:`mlofc_ros.solver.focal.FocalEstimate`).
+Scored on the published labels of every full window (a line the solver leaves unassigned keeps
+its last body for ``label_memory`` frames, as the node publishes it; ``-1`` counts as wrong).
+Stamps are 30 frames/s (only the published rad/s depend on them). Reference on the same lines:
+the cold search (as `bench hopkins`, f unknown) at the middle and the last window. With
+``--methods auto`` each stream starts rotation-only (``'robust'``) and moves to ``'general'``
+once the rotation model misfits it (:mod:`mlofc_ros.method_choice`).
 """
 import argparse
 import os
@@ -57,14 +60,15 @@ QUICK_SEQUENCE = 'three-cars'
 
 
 def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
-                    cold: bool = True) -> Dict[str, object]:
+                    cold: bool = True, method: str = 'general') -> Dict[str, object]:
     """
     Stream one sequence through the warm path; per-window misclassification (worker).
 
     ``windows``: stop after this many (default: to the end of the sequence); ``cold=False``
-    skips the cold reference solves.
+    skips the cold reference solves; ``method``: the pipeline's (the cold reference is
+    always ``'general'``).
 
-    Returns a record: ``name``, ``n``, ``frames``, ``lines``, ``stream`` (the
+    Returns a record: ``name``, ``method``, ``n``, ``frames``, ``lines``, ``stream`` (the
     misclassification of every window, first to last), ``cold_mid`` / ``cold_last`` (the
     cold search at the middle / last window), ``cpu_warm`` (median CPU s per warm solve).
     """
@@ -79,7 +83,7 @@ def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
                                    max_uses=MAX_USES)
     frames = tracks.shape[1]
     ids = np.arange(tracks.shape[0])
-    pipe = Pipeline(num_bodies=n, window=K, method='general', seed=s)
+    pipe = Pipeline(num_bodies=n, window=K, method=method, seed=s)
     stream, cpu = [], []
     end = frames if windows is None else min(frames, K + windows - 1)
     for t in range(end):                                 # frames, not lines
@@ -89,7 +93,7 @@ def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
             cpu.append(time.process_time() - c)
         if t >= K - 1:
             stream.append(misclassification(res.labels, truth, n))
-    rec = {'name': seq.name, 'group': seq.group, 'n': n, 'frames': frames,
+    rec = {'name': seq.name, 'method': method, 'group': seq.group, 'n': n, 'frames': frames,
            'lines': int(len(truth)), 'stream': stream,
            'cpu_warm': float(np.median(cpu)) if cpu else float('nan')}
     last = frames - K
@@ -106,18 +110,19 @@ def _unit(item) -> Dict[str, object]:
 
 def summary_table(records: Sequence[Dict[str, object]]) -> str:
     """Markdown: mean (median) misclassification % per number of motions."""
-    lines = ['| motions | sequences | every window | middle window | last window '
+    lines = ['| method | motions | sequences | every window | middle window | last window '
              '| cold search, middle | cold search, last | CPU s per warm solve (median) |',
-             '|--:|--:|--:|--:|--:|--:|--:|--:|']
+             '|:--|--:|--:|--:|--:|--:|--:|--:|--:|']
 
     def cell(v: List[float]) -> str:
         return f'{100 * np.mean(v):.1f} ({100 * np.median(v):.1f})' if v else '-'
-    for n in sorted({r['n'] for r in records}):
-        sel = [r for r in records if r['n'] == n]
+    for method, n in dict.fromkeys((r['method'], r['n'])
+                                   for r in sorted(records, key=lambda r: r['n'])):
+        sel = [r for r in records if r['n'] == n and r['method'] == method]
         mid = [r['stream'][min((r['frames'] - K) // 2, len(r['stream']) - 1)] for r in sel]
         cold = {key: [r[key] for r in sel if key in r] for key in ('cold_mid', 'cold_last')}
         lines.append(
-            f'| {n} | {len(sel)} | {cell([np.mean(r["stream"]) for r in sel])} '
+            f'| {method} | {n} | {len(sel)} | {cell([np.mean(r["stream"]) for r in sel])} '
             f'| {cell(mid)} | {cell([r["stream"][-1] for r in sel])} '
             f'| {cell(cold["cold_mid"])} | {cell(cold["cold_last"])} '
             f'| {np.median([r["cpu_warm"] for r in sel]):.2f} |')
@@ -126,12 +131,12 @@ def summary_table(records: Sequence[Dict[str, object]]) -> str:
 
 def sequence_table(records: Sequence[Dict[str, object]]) -> str:
     """Markdown: per sequence, every window's mean % and the last, and the cold search's."""
-    lines = ['| sequence | motions | frames | lines | every / last window '
-             '| cold: middle / last |', '|:--|--:|--:|--:|--:|--:|']
-    for r in sorted(records, key=lambda r: r['name']):
+    lines = ['| sequence | method | motions | frames | lines | every / last window '
+             '| cold: middle / last |', '|:--|:--|--:|--:|--:|--:|--:|']
+    for r in sorted(records, key=lambda r: (r['name'], r['method'])):
         cold = (f'{100 * r["cold_mid"]:.1f} / {100 * r["cold_last"]:.1f}'
                 if 'cold_mid' in r else '-')
-        lines.append(f'| {r["name"]} | {r["n"]} | {r["frames"]} | {r["lines"]} '
+        lines.append(f'| {r["name"]} | {r["method"]} | {r["n"]} | {r["frames"]} | {r["lines"]} '
                      f'| {100 * np.mean(r["stream"]):.1f} / {100 * r["stream"][-1]:.1f} '
                      f'| {cold} |')
     return '\n'.join(lines)
@@ -148,6 +153,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                         '--sequences; 0 = all)')
     p.add_argument('--windows', type=int, default=None,
                    help='stop each stream after this many windows (default: its end)')
+    p.add_argument('--methods', default='general',
+                   help='comma-separated pipeline methods (general, auto, ...; default general)')
     p.add_argument('--quick', action='store_true',
                    help=f'smoke run: {QUICK_SEQUENCE}, 3 windows, one process')
     p.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1))
@@ -174,12 +181,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if motions:
         paths = [p for p in paths if n_motions_of(p) == motions]
     # cut streams (--windows) have no middle or last window to compare with
-    items = [(str(p), 155, args.windows, args.windows is None) for p in paths]
+    methods = [m for m in args.methods.split(',') if m]
+    # the cold reference once per sequence (it does not depend on the stream's method)
+    items = [(str(p), 155, args.windows, args.windows is None and i == 0, m)
+             for p in paths for i, m in enumerate(methods)]
     t0 = time.perf_counter()
     records = common.run_parallel(_unit, items, args.jobs, 'sequences')
     seconds = time.perf_counter() - t0
     report = '\n'.join([
-        common.run_header('Hopkins155 line tracks streamed through the warm path of `general`',
+        common.run_header('Hopkins155 line tracks streamed through the warm path: '
+                          + ', '.join(f'`{m}`' for m in methods),
                           common.command_line('hopkins_stream', argv), {
                               'Sequences': f'{len(paths)}; K = {K}',
                               'Run time': f'{seconds:.0f} s wall with {args.jobs} worker '

@@ -176,7 +176,9 @@ def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
         time.sleep(0.3)
         stats = bench_ros.read_stats(stats_path) or {}
         got = answers(bench, stamps, n_bodies)
-    first = min(args.window - 1, len(stamps) - 1)
+    from mlofc_ros.pipeline import window_frames
+    size = window_frames({'window': args.window, 'method': args.method})   # 0: the method's
+    first = min(size - 1, len(stamps) - 1)
     scored = [f for f in range(first, len(stamps)) if got[f] is not None]
     solved = [f for f in scored if got[f].solved]
     return {'published': len(stamps), 'received': int(stats.get('received', 0)),
