@@ -423,7 +423,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--real-dir', default=REAL_DIR,
                    help=f'real sequences (default {REAL_DIR}); scores {SEQUENCE}/')
     common.add_methods_option(p, 'robust,general')
-    p.add_argument('--window', type=int, default=10, help='window length, frames (10)')
+    p.add_argument('--window', type=int, default=10,
+                   help="window length, frames (10); 0: each method's own")
     p.add_argument('--moving-px', type=float, default=MOVING_PX,
                    help=f'a segment moving more than this over {LAG} frames is moving (2.0)')
     p.add_argument('--proxy', choices=list(PROXIES), default='normal',
@@ -439,6 +440,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     args.method_list = common.method_list(p, args)
     if args.quick:
         args.first, args.last, args.method_list = 30, 60, args.method_list[:1]
+    # frames after which every method's window is full (the moving phase starts after them)
+    from mlofc_ros.pipeline import window_frames
+    args.span = max(window_frames({'window': args.window, 'method': m})
+                    for m in args.method_list)
     return args
 
 
@@ -463,8 +468,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], runs: Dict[str, 
         The commit at the start of the runs.
 
     """
-    phase_start = MOTION_START + args.window
-    steady = slice(args.window, None)             # CPU statistics once the window is full
+    phase_start = MOTION_START + args.span
+    steady = slice(args.span, None)             # CPU statistics once the window is full
     other = next(p for p in PROXIES if p != args.proxy)
     scores = {(m, p): score_run(run['results'], args.moving_px, p)
               for m, run in runs.items() for p in PROXIES}
@@ -475,6 +480,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], runs: Dict[str, 
                      f'starts at frame {MOTION_START}, the moving phase (scored) at frame '
                      f'{phase_start}',
          'Pipeline': f'`num_bodies=2`, `window={args.window}`'
+                     + (" (each method's own)" if args.window == 0 else '')
                      + ''.join(f', `{k}:={v}`' for k, v in args.params.items()),
          'Proxy': f'{args.proxy} ({PROXIES[args.proxy]}) over {LAG} frames; moving > '
                   f'{args.moving_px:g} px, still < {STILL_PX:g} px',
@@ -496,7 +502,7 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], runs: Dict[str, 
              'every segment on one id has all its moving segments on the moving body). '
              f'Moving per frame before the drag: segments the proxy calls moving '
              f'in frames {span[0] + LAG}-{MOTION_START - 1}, where the scene is nearly still '
-             f'(false alarms of the proxy). CPU ms over frames >= {span[0] + args.window} '
+             f'(false alarms of the proxy). CPU ms over frames >= {span[0] + args.span} '
              '(window full); mean / LSD: mean `Pipeline.process` over median LSD.', '',
              f'## The same runs with the {other} proxy', '',
              common.markdown_table(SUMMARY_HEADERS[:10], other_rows),
@@ -542,11 +548,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         runs[method] = run_method(frames, indices, camera, method, args.window, args.params)
         row = summary_row(method, score_run(runs[method]['results'], args.moving_px,
                                             args.proxy),
-                          MOTION_START + args.window, runs[method]['ms'][args.window:],
-                          runs[method]['lsd_ms'][args.window:])
+                          MOTION_START + args.span, runs[method]['ms'][args.span:],
+                          runs[method]['lsd_ms'][args.span:])
         common.eprint('  ' + ' | '.join(common.format_number(c) for c in row))
     out_dir = common.results_dir('real', args.out)
-    strip = render_strip(frames, runs, strip_frames(MOTION_START + args.window, last))
+    strip = render_strip(frames, runs, strip_frames(MOTION_START + args.span, last))
     if strip is not None:
         cv2.imwrite(str(out_dir / f'{SEQUENCE}.png'), strip, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     report = build_report(args, argv, runs, (indices[0], last), time.monotonic() - t0,
