@@ -114,10 +114,10 @@ def test_live_quick_writes_report(tmp_path: pathlib.Path) -> None:
     assert live.main(['--quick', '--out', str(tmp_path)]) == 0
     text = (tmp_path / 'README.md').read_text()
     assert '## Over the seeds' in text and '## Every run' in text
-    row = [ln for ln in text.splitlines() if ln.startswith('| own2 | 0 | 10 |')]
+    row = [ln for ln in text.splitlines() if ln.startswith('| own2 | general | 0 | 10 |')]
     assert len(row) == 1
     published, answered, unsolved, carried, dropped = (int(x)
-                                                       for x in row[0].split('|')[4:9])
+                                                       for x in row[0].split('|')[5:10])
     # every frame that reached the node was tracked; the solver answered some of them, the
     # running fit some of the others
     assert published == 15 and answered >= 1 and dropped == 0

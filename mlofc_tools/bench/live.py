@@ -62,7 +62,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     ap.add_argument('--scenes', default='own2+bg,own3+bg', help='scenes of bench spinning')
     ap.add_argument('--seeds', default='0,1,2', help='render seeds')
     ap.add_argument('--rates', default='10,30', help='publishing rates, Hz')
-    ap.add_argument('--method', default='general')
+    ap.add_argument('--methods', default='general',
+                    help='comma-separated node methods, each run on every scene and rate')
     ap.add_argument('--window', type=int, default=10)
     ap.add_argument('--param', action='append', default=[], metavar='NAME:=VALUE',
                     help='another node parameter (repeatable), e.g. solver_process:=false')
@@ -81,6 +82,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     except argparse.ArgumentTypeError as exc:
         ap.error(str(exc))
     args.seed_list = [int(s) for s in args.seeds.split(',') if s]
+    args.method_list = [m for m in args.methods.split(',') if m]
     args.rate_list = [float(r) for r in args.rates.split(',') if r]
     return args
 
@@ -154,14 +156,14 @@ def answers(bench: LiveBench, stamps: Sequence[int], n_bodies: int) -> List[Any]
     return out
 
 
-def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
-            ) -> Dict[str, Any]:
-    """One fresh node, one scene published at ``rate``; counts and scores."""
+def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path,
+            method: str) -> Dict[str, Any]:
+    """One fresh node with ``method``, one scene published at ``rate``; counts and scores."""
     from mlofc_tools.demo_node import fresh_domain_id
     n_bodies = len(seq.body_names)
     domain = fresh_domain_id()
     stats_path = work / f'stats_{domain}.json'
-    ros_args = ['-p', f'num_bodies:={n_bodies}', '-p', f'method:={args.method}',
+    ros_args = ['-p', f'num_bodies:={n_bodies}', '-p', f'method:={method}',
                 '-p', f'window:={args.window}', '-p', 'queue_size:=2']
     for item in args.param:
         ros_args += ['-p', item]
@@ -177,7 +179,7 @@ def run_one(args: argparse.Namespace, seq: Any, rate: float, work: pathlib.Path
         stats = bench_ros.read_stats(stats_path) or {}
         got = answers(bench, stamps, n_bodies)
     from mlofc_ros.pipeline import window_frames
-    size = window_frames({'window': args.window, 'method': args.method})   # 0: the method's
+    size = window_frames({'window': args.window, 'method': method})   # 0: the method's
     first = min(size - 1, len(stamps) - 1)
     scored = [f for f in range(first, len(stamps)) if got[f] is not None]
     solved = [f for f in scored if got[f].solved]
@@ -199,7 +201,7 @@ def _score(seq: Any, got: Sequence[Any], frames: Sequence[int]) -> Optional[Dict
     return spinning.score_run(sub, [(got[f], math.nan) for f in frames], 0)
 
 
-HEADERS = ['scene', 'seed', 'rate Hz', 'published', 'answered', 'tracked, not solved',
+HEADERS = ['scene', 'method', 'seed', 'rate Hz', 'published', 'answered', 'tracked, not solved',
            'answered from the running fit', 'dropped before tracking', 'scored frames',
            'wrong %', 'per frame', '-1 %', 'wrong % of the solved frames',
            'omega err % (boxes)', 'boxes with omega err <= 5%']
@@ -211,7 +213,7 @@ def build_rows(records: Sequence[Dict[str, Any]]) -> List[List[object]]:
         sc = r['score']
         err = np.asarray(sc['omega_err']) if sc else np.zeros(0)
         moving = err[np.isfinite(err)] if sc else err
-        rows.append([r['scene'], r['seed'], r['rate'], r['published'], r['answered'],
+        rows.append([r['scene'], r['method'], r['seed'], r['rate'], r['published'], r['answered'],
                      r['unsolved'], r['carried'], r['queue_dropped'], r['scored'],
                      100 * sc['wrong'] if sc else math.nan,
                      100 * sc['wrong_frame'] if sc else math.nan,
@@ -224,16 +226,15 @@ def build_rows(records: Sequence[Dict[str, Any]]) -> List[List[object]]:
 
 def summary_rows(records: Sequence[Dict[str, Any]]) -> List[List[object]]:
     rows = []
-    keys = sorted({(r['scene'], r['rate']) for r in records},
-                  key=lambda k: (k[0], k[1]))
-    for scene, rate in keys:
-        rs = [r for r in records if r['scene'] == scene and r['rate'] == rate and r['score']]
+    for scene, method, rate in sorted({(r['scene'], r['method'], r['rate']) for r in records}):
+        rs = [r for r in records if (r['scene'], r['method'], r['rate']) == (scene, method, rate)
+              and r['score']]
         if not rs:
             continue
         wrong = [100 * r['score']['wrong'] for r in rs]
         err = np.concatenate([np.asarray(r['score']['omega_err']) for r in rs])
         err = err[np.isfinite(err)]
-        rows.append([scene, rate, len(rs), float(np.mean(wrong)), float(np.max(wrong)),
+        rows.append([scene, method, rate, len(rs), float(np.mean(wrong)), float(np.max(wrong)),
                      _mean_pct([r['score'] for r in rs], 'wrong_frame'),
                      _mean_pct([r['score'] for r in rs], 'unassigned'),
                      100 * float(np.median(err)) if err.size else math.nan,
@@ -265,15 +266,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             for seed in args.seed_list:
                 seq = spinning.render_scene(scene, seed, args.frames)
                 for rate in args.rate_list:
-                    rec = dict(run_one(args, seq, rate, pathlib.Path(tmp)), scene=scene,
-                               seed=seed, rate=rate)
-                    records.append(rec)
-                    common.eprint('live: ' + ' '.join(common.format_number(c)
-                                                      for c in build_rows([rec])[0]))
+                    for method in args.method_list:     # interleaved: the same load
+                        rec = dict(run_one(args, seq, rate, pathlib.Path(tmp), method),
+                                   scene=scene, seed=seed, rate=rate, method=method)
+                        records.append(rec)
+                        common.eprint('live: ' + ' '.join(common.format_number(c)
+                                                          for c in build_rows([rec])[0]))
     text = '\n'.join([
         common.run_header('Spinning boxes through the running node, published in real time',
                           common.command_line('live', argv), {
-                              'Node': f'`method:={args.method} window:={args.window} '
+                              'Node': f'`method:={"|".join(args.method_list)} '
+                                      f'window:={args.window} '
                                       f'queue_size:=2{"".join(" " + p for p in args.param)}`, '
                                       'camera_info given; a fresh node per run',
                               'Sequences': f'{args.frames} frames 640x480 per run (image '
@@ -283,7 +286,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                            f'(1 min) at start {load[0]:.1f}'}, revision),
         '## Over the seeds',
         '',
-        common.markdown_table(['scene', 'rate Hz', 'runs', 'wrong % (mean)', 'wrong % (worst)',
+        common.markdown_table(['scene', 'method', 'rate Hz', 'runs', 'wrong % (mean)', 'wrong % (worst)',
                                'per frame (mean)', '-1 % (mean)',
                                'omega err % (median over boxes)', 'boxes with omega err <= 5%',
                                'answered share', 'wrong % of the solved frames (mean)',
