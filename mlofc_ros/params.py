@@ -104,10 +104,11 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               "every frame. 0 = the method's own: 10 for general and auto (a translation needs "
               'them), 5 for the others.',
               range=(0, 30)),
-    ParamSpec('method', str, 'robust',
-              'Solver method (one of mlofc_ros.solver.METHODS), or auto: robust until its '
+    ParamSpec('method', str, 'auto',
+              'Solver method: auto = robust (rotation about the camera, fast) until its '
               'rotation model misfits the scene (bodies translate relative to the camera), '
-              'then general for good (mlofc_ros.method_choice).'),
+              'then general for good (mlofc_ros.method_choice); or one of '
+              'mlofc_ros.solver.METHODS.'),
     ParamSpec('min_segment_length', float, 20.0,
               'Shortest line segment detected and tracked, in pixels.',
               range=(2.0, 10000.0)),

@@ -772,7 +772,7 @@ class Pipeline:
         self._warm.solved(method, res, obs.stamp, obs.frame_interval)
         if (auto and method.name == self._choice.method
                 and tracks.shape[1] >= min(method.window, self._window.size)):
-            self._choice.add(res.diagnostics.sigma_px, tracks)
+            self._choice.add(res.residuals, tracks)
         return res
 
     def _step_beside_lane(self, obs: Observation, method: Method, n: int, lane: Any,

@@ -80,7 +80,7 @@ def _serve(conn: Connection) -> None:
         # the full solves of a stepping method in a lane of their own: the frames step
         # meanwhile (its child started now for such a method, else at its first job)
         pipeline.use_lane(ProcessLane())
-        if get_method(pipeline.params['method']).accepts('step_only'):
+        if get_method(pipeline.method).accepts('step_only'):
             pipeline.lane.start()
     try:
         _serve_requests(conn, pipeline)

@@ -14,10 +14,10 @@
 """
 ``python -m mlofc_tools.demo`` (``make demo``): the node, end to end, on a rendered bag.
 
-1. Render boxes rotating about the camera centre in front of a static striped wall (2 boxes +
-   background = 3 bodies, 640x480, 60 frames at 30 Hz, known angular velocities and edges);
-   ``--motion own_centre``: boxes spinning about their own centres, which also translate
-   relative to the camera (for ``--method general``).
+1. Render boxes spinning about their own centres, which also translate relative to the
+   camera, in front of a static striped wall (2 boxes + background = 3 bodies, 640x480, 60
+   frames at 30 Hz, known angular velocities and edges); ``--motion camera_centre``: boxes
+   rotating about the camera centre (the paper's model, ``robust``'s).
 2. Write them as a rosbag2 (mcap) with ``sensor_msgs/Image`` mono8 and ``CameraInfo``.
 3. Start ``mlofc_node`` as a separate process on the run's ``ROS_DOMAIN_ID``, play the bag into it
    over DDS with :mod:`mlofc_ros.bag.player` (lock-step: the next frame goes out when the node
@@ -310,9 +310,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--boxes', type=int, default=2, help='moving boxes, 1..4 (default 2)')
     p.add_argument('--size', type=_size, default=(640, 480), help='WxH (default 640x480)')
     p.add_argument('--seed', type=int, default=0, help='scene and noise seed (default 0)')
-    p.add_argument('--motion', choices=list(MOTIONS), default='camera_centre',
-                   help="how the boxes move (default camera_centre: the paper's rotation "
-                        'about the camera; own_centre: spinning in place, so translating too)')
+    p.add_argument('--motion', choices=list(MOTIONS), default='own_centre',
+                   help='how the boxes move (default own_centre: spinning in place, so '
+                        "translating too; camera_centre: the paper's rotation about the camera)")
     p.add_argument('--method', help='solver method (node parameter; default: its default)')
     p.add_argument('--window', type=int, help='window length (node parameter)')
     p.add_argument('--out', default=None,

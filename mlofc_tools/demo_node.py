@@ -202,16 +202,19 @@ def run_node(bag_path: Path, cfg: DemoConfig, workdir: Path,
 
 def _node_command_line(cfg: DemoConfig) -> List[str]:
     """Return the node's command line: remappings and the parameters ``cfg`` sets."""
+    from mlofc_ros import params as P
+    from mlofc_ros.method_choice import AUTO
     from mlofc_ros.solver import get_method
     params: Dict[str, Any] = {'num_bodies': cfg.num_bodies}
     if cfg.method:
         params['method'] = cfg.method
     if cfg.window:
         params['window'] = cfg.window
-    if cfg.method and get_method(cfg.method).slow:
+    method = cfg.method or P.defaults()['method']
+    if method == AUTO or get_method(method).slow:
         # fed in lock-step, every frame can be solved in turn: in a child process a slow
         # method's search runs beside the frames, which are answered from the running fit
-        # until it is back (a demo clip is over by then)
+        # until it is back (a demo clip is over by then); 'auto' may move to one
         params['solver_process'] = 'false'
     command = node_command() + ['--ros-args', '-r', f'__node:={NODE_NAME}',
                                 '-r', f'image:={IMAGE_TOPIC}', '-r', f'camera_info:={INFO_TOPIC}']

@@ -43,9 +43,10 @@ def test_match_bodies_maximises_overlap():
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.parametrize('method', [[], ['--method', 'general']])
+@pytest.mark.parametrize('method', [[], ['--method', 'robust', '--motion', 'camera_centre']])
 def test_demo_runs_the_node_as_a_subprocess(tmp_path, method):
-    # a slow method too: fed in lock-step, it solves every frame (its motions in the table)
+    # the default (auto, moving to general on the spinning boxes; fed in lock-step, every
+    # frame solved) and the rotation model on its own scene
     proc = subprocess.run(
         [sys.executable, '-m', 'mlofc_tools.demo', '--frames', '20', '--out', str(tmp_path)]
         + method, capture_output=True, text=True, timeout=150)
@@ -74,17 +75,19 @@ def test_demo_fails_cleanly_when_the_node_does_not_answer(tmp_path, monkeypatch,
     assert not (tmp_path / 'README.md').exists()
 
 
-def test_demo_renders_boxes_that_translate_on_request():
-    assert demo._parser().parse_args([]).motion == 'camera_centre'
-    assert demo._parser().parse_args(['--motion', 'own_centre']).motion == 'own_centre'
+def test_demo_renders_boxes_that_translate_by_default():
+    assert demo._parser().parse_args([]).motion == 'own_centre'
+    assert demo._parser().parse_args(['--motion', 'camera_centre']).motion == 'camera_centre'
     assert set(demo.MOTIONS) == {'camera_centre', 'own_centre'}
 
 
 def test_demo_solves_a_slow_method_in_the_nodes_own_thread():
     general = demo_node._node_command_line(demo_node.DemoConfig(method='general'))
     assert 'method:=general' in general and 'solver_process:=false' in general
+    # the default, 'auto', may move to 'general'
+    assert 'solver_process:=false' in demo_node._node_command_line(demo_node.DemoConfig())
     assert not any('solver_process' in a for a in demo_node._node_command_line(
-        demo_node.DemoConfig()))
+        demo_node.DemoConfig(method='robust')))
 
 
 def test_demo_uses_the_domain_the_environment_sets(monkeypatch):

@@ -339,7 +339,7 @@ def test_in_process_bad_input_queue_drops_and_parameter_changes(ros):
             res = h.set_params('/robust/mlofc', **{name: value})[0]
             assert not res.successful and word in res.reason, res.reason
         assert h.get_params('/robust/mlofc', 'window', 'method', 'num_bodies',
-                            'detect_regions') == [4, 'robust', 3, True]
+                            'detect_regions') == [4, 'auto', 3, True]
         n = len(clouds)
         send_frames(h, pub, seq.frames[5:7], [10.0, 10.0 + 1 / 30], clouds)
         assert len(clouds) == n + 2

@@ -21,7 +21,7 @@ from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import METHODS
 import pytest
 
-REQUIRED = {'num_bodies': (int, 2), 'window': (int, 0), 'method': (str, 'robust'),
+REQUIRED = {'num_bodies': (int, 2), 'window': (int, 0), 'method': (str, 'auto'),
             'min_segment_length': (float, 20.0), 'focal_length': (float, 0.0),
             'publish_debug_image': (bool, False), 'max_pixels': (int, 4096 * 4096),
             'queue_size': (int, 2), 'max_frame_gap': (float, None)}
@@ -111,7 +111,7 @@ def test_markdown_table_lists_every_parameter():
     assert len(lines) == 2 + len(params.PARAMETERS)
     for spec in params.PARAMETERS:
         assert f'`{spec.name}`' in table
-    assert '[2, 30]' in table and "'robust'" in table
+    assert '[2, 30]' in table and "'auto'" in table
 
 
 def test_fld_backend_needs_opencv_contrib():

@@ -451,15 +451,17 @@ def test_constructor_and_reconfigure_validate_like_the_node():
 
 def test_window_zero_takes_the_methods_own_and_follows_the_method():
     # `window` 0 (the default): 'general' needs 10 frames to tell a translation from a turn
-    # about an axis in the image plane, the other methods keep 5; a length given wins
+    # about an axis in the image plane, the other methods keep 5, 'auto' general's (it may
+    # move to it); a length given wins
     from mlofc_ros.pipeline import window_frames
     from mlofc_ros.solver import get_method
     assert Pipeline().params['window'] == 0
     assert window_frames({'window': 0, 'method': 'robust'}) == 5
     assert window_frames({'window': 0, 'method': 'general'}) == get_method('general').window == 10
+    assert window_frames({'window': 0, 'method': 'auto'}) == 10
     assert window_frames({'window': 7, 'method': 'general'}) == 7
     seq = small_sequence(14)
-    p = Pipeline(num_bodies=2, focal_length=300.0)
+    p = Pipeline(num_bodies=2, focal_length=300.0, method='robust')
     fills = [p.process(g, t, seq.camera).window_fill for g, t in zip(seq.frames[:7], seq.stamps)]
     assert fills == [1, 2, 3, 4, 5, 5, 5] and p.window_size == 5
     p.reconfigure(method='general')            # its own window: restarted at 10 frames
@@ -647,7 +649,7 @@ def test_estimated_focal_length_is_refined_online():
     """
     seq = render_sequence(n_boxes=2, n_frames=30, size=(320, 240), motion='camera_centre',
                           background=True, noise_sigma=1.0, seed=3)
-    rotation_only = run(Pipeline(num_bodies=3, window=4), seq, camera=None)
+    rotation_only = run(Pipeline(num_bodies=3, window=4, method='robust'), seq, camera=None)
     assert {r.focal_length for r in rotation_only[FOCAL_SAMPLES + 2:]} == {
         rotation_only[-1].focal_length}
     assert not rotation_only[-1].focal_observable
@@ -815,7 +817,7 @@ def test_line_tracks_give_what_the_images_give_through_the_same_tracker():
         np.testing.assert_array_equal(a.labels, b.labels)
         np.testing.assert_array_equal(a.angular_velocities, b.angular_velocities)
         np.testing.assert_array_equal(a.residuals, b.residuals)
-    assert b.solved and b.window_fill == lines.window_size == 5
+    assert b.solved and b.window_fill == 8 and lines.window_size == 10    # auto's (general's)
 
 
 def test_line_tracks_of_a_synthetic_stream_are_segmented_with_stable_ids():
