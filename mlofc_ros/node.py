@@ -49,7 +49,10 @@ drops the stalest frame), so the executor is never blocked by the work and any e
 (``rclpy.spin``, a MultiThreadedExecutor, ...) can host the node. The tracking worker
 decodes every queued image, tracks its lines and adds them to the window
 (:meth:`Pipeline.observe`). A fast solve (the last one under :data:`INLINE_SOLVE_S`) follows in
-the same thread (:meth:`Pipeline.solve`, then publishing). A slow method's
+the same thread (:meth:`Pipeline.solve`, then publishing): so does the default method,
+``auto``, until its rotation model misfits the scene and it moves to ``general``
+(:mod:`mlofc_ros.method_choice`; logged once, the solver then placed as after a change of
+``method``). A slow method's
 (:attr:`mlofc_ros.solver.Method.slow`: 1-3 s per window) goes to a solver worker, which
 segments the newest window it has not solved yet while the tracking worker goes on: the
 tracker still sees every frame, so its tracks survive. With ``solver_process`` (the default)
@@ -647,9 +650,9 @@ class MlofcNode(Node):
         """Say that method 'auto' moved to the general model, and place the solver anew."""
         choice = self._pipeline.method_choice
         self.get_logger().info(
-            f'method auto: the rotation model misfits the scene (its noise {choice.ratio:.1f}x '
-            "the tracks' jitter: bodies translate relative to the camera); solving with "
-            f'{self._pipeline.method} from now on')
+            'method auto: the rotation model misfits the scene (its median track residual '
+            f"{choice.ratio:.1f}x the tracks' jitter: bodies translate relative to the "
+            f'camera); solving with {self._pipeline.method} from now on')
         with self._lock:
             self._move_solver = True
             self._method = self._pipeline.method    # said once

@@ -731,7 +731,7 @@ class Pipeline:
         method = get_method(self.method).for_window(obs.window_fill, self._window.size)
         tracks = obs.win_tracks
         if auto and int(self.params['window']) == 0:
-            tracks = tracks[:, -method.window:]     # 'auto' keeps the general model's window
+            tracks = tracks[:, -method.window:]     # the general model's window, its own frames
 
         # the solver's keywords for this window, warm starts aside
         common = {'intrinsics': obs.intrinsics, 'image_size': obs.image_size,
