@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """
-Hopkins155 line tracks streamed through `general`'s warm path, as the node solves them.
+Hopkins155 line tracks streamed through a method's warm path, as the node solves them.
 
 ``python -m mlofc_tools.bench hopkins_stream [--motions 3] [--methods general,auto]
 [--sequences ...] [--out DIR]``
