@@ -90,10 +90,11 @@ from mlofc_ros import params as P
 from mlofc_ros.camera import CameraModel
 from mlofc_ros.image import image_msg_to_gray
 from mlofc_ros.messages.debug import draw_debug
+from mlofc_ros.method_choice import AUTO, TRANSLATION_METHOD
 from mlofc_ros.pipeline import FrameResult, Observation, Pipeline, window_frames
 from mlofc_ros.ros_messages import (camera_info_size, camera_model_from_info, debug_image_msg,
                                     segments_msg, stamp_to_seconds, twist_msg)
-from mlofc_ros.solve_process import SolveProcess, SolverProcessEnded
+from mlofc_ros.solve_process import SolveProcess, SolverProcessEnded, SolverProcessError
 from mlofc_ros.solver import get_method
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -220,7 +221,10 @@ class MlofcNode(Node):
         self._pipeline = Pipeline(**{k: values[k] for k in P.names('pipeline')})
         # the solve side in a child process (solver_process, a slow method), or None: here
         self._remote: Optional[SolveProcess] = None
+        self._remote_method = ''            # the method it was started or reconfigured with
         self._remote_ended = 0              # children ended since the last remote solve
+        # method 'auto' on the rotation model: the general model's child, started and idle
+        self._standby: Optional[SolveProcess] = None
         self._place_solver({})
 
         out_qos = QoSProfile(depth=OUTPUT_DEPTH)
@@ -454,29 +458,68 @@ class MlofcNode(Node):
         """
         Solve in a child process or here, as ``solver_process`` and the method ask.
 
-        ``changes``: the pipeline parameters just applied here, for the child too. Moving the
-        solve side (a child started or closed) restarts the body ids: the state stays behind.
+        ``changes``: the pipeline parameters just applied here, for the children too. The
+        solve side's state moves with the solving (body ids, count, focal estimate, running
+        fit: :meth:`Pipeline.hand_over`). With method 'auto' still on the rotation model the
+        child of the general model is started beforehand and waits (:attr:`_standby`), so
+        that the switch solves at once.
         """
         self._method = self._pipeline.method
-        wanted = self._values['solver_process'] and get_method(self._method).slow
-        if wanted and self._remote is None:
-            try:
-                # the method the pipeline solves with now ('auto' stays with it in the child)
-                self._remote = SolveProcess(dict(self._pipeline.params, method=self._method))
-            except OSError as exc:
-                self.get_logger().error(f'cannot start the solver process ({exc}): solving '
-                                        'in the node process')
-                return
-            self._remote_ended = 0
-            self._pipeline.forget_solves()
-            self.get_logger().info(f'solving in a child process (pid {self._remote.pid})')
-        elif not wanted and self._remote is not None:
-            self._remote.close()
-            self._remote = None
-            self._pipeline.forget_solves()
+        process = self._values['solver_process']
+        wanted = process and get_method(self._method).slow
+        standby = process and not wanted and self._pipeline.params['method'] == AUTO
+        if self._remote is not None and changes:
+            self._remote.reconfigure(**dict(changes, method=self._remote_method))
+        if self._standby is not None and changes:
+            self._standby.reconfigure(**dict(changes, method=TRANSLATION_METHOD))
+        if not wanted and self._remote is not None:
+            remote, self._remote = self._remote, None
+            self._take_solve_side(remote)
+            if (standby and self._standby is None
+                    and self._remote_method == TRANSLATION_METHOD):
+                self._standby = remote                  # it waits for the next switch
+            else:
+                remote.close()
             self.get_logger().info('solving in the node process')
-        elif self._remote is not None and changes:
-            self._remote.reconfigure(**changes)
+        elif wanted and self._remote is None:
+            self._start_remote()
+        if not standby and self._standby is not None:
+            self._standby.close()
+            self._standby = None
+        elif standby and self._standby is None:
+            self._standby = self._spawn(TRANSLATION_METHOD)
+
+    def _spawn(self, method: str) -> Optional[SolveProcess]:
+        """Start a child process that solves with ``method``; None (logged) when it cannot."""
+        try:
+            return SolveProcess(dict(self._pipeline.params, method=method))
+        except OSError as exc:
+            self.get_logger().error(f'cannot start the solver process ({exc}): solving '
+                                    'in the node process')
+            return None
+
+    def _start_remote(self) -> None:
+        """Solve in a child process from now on: the standby's, or a new one."""
+        remote, self._standby = self._standby, None
+        if remote is None or self._method != TRANSLATION_METHOD or not remote.alive:
+            if remote is not None:
+                remote.close()
+            remote = self._spawn(self._method)
+            if remote is None:
+                return
+        remote.take_over(self._pipeline.hand_over())     # sent with its first solve
+        self._remote, self._remote_method = remote, self._method
+        self._remote_ended = 0
+        self.get_logger().info(f'solving in a child process (pid {remote.pid})')
+
+    def _take_solve_side(self, remote: SolveProcess) -> None:
+        """Take the solve side's state back from a child before solving here."""
+        try:
+            self._pipeline.take_over(remote.hand_over())
+        except SolverProcessError as exc:
+            self.get_logger().warning(f'the solver process kept its state ({exc}): the body '
+                                      'ids restart')
+            self._pipeline.forget_solves()
 
     def _count(self, key: str) -> None:
         with self._lock:
@@ -688,8 +731,9 @@ class MlofcNode(Node):
         for worker in (self._worker, self._solver):
             if worker.is_alive() and threading.current_thread() is not worker:
                 worker.join(timeout=10.0)
-        if self._remote is not None:
-            self._remote.close()
+        for child in (self._remote, self._standby):
+            if child is not None:
+                child.close()
         super().destroy_node()
 
 

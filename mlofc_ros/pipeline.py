@@ -86,6 +86,24 @@ class SolveState(NamedTuple):
     focal: Optional[Tuple[float, float]]
 
 
+class SolveSide(NamedTuple):
+    """
+    The solve side's state that moves with the solving (:meth:`Pipeline.hand_over`).
+
+    ``bodies``: the stable body ids and their tracks' histories; ``count``, ``counted_ids``:
+    the automatic count and the stable id of each of its bodies; ``focal``: the focal
+    estimate of an uncalibrated stream (its window samples, the estimate, the stamp of its
+    last evidence, and what it gives the observations: ``(f px, std of ln f)`` or None);
+    ``running``: the last answer, carried until the next one.
+    """
+
+    bodies: BodyTracker
+    count: BodyCount
+    counted_ids: Optional[np.ndarray]
+    focal: Tuple[List[float], Optional[FocalEstimate], float, Optional[Tuple[float, float]]]
+    running: Optional[RunningFit]
+
+
 def make_tracker(params: Mapping[str, Any]) -> LineTracker:
     """Build the line tracker the pipeline runs with ``params`` (node names)."""
     return LineTracker(TrackerConfig.from_params(params))
@@ -671,13 +689,41 @@ class Pipeline:
         """
         Restart the solve side from the next observation: body ids, warm starts, the count.
 
-        For a caller that moves the solving elsewhere (another process, or back): the next
-        observation resets the bodies and the focal estimate of whichever side solves it, and
-        nothing is carried from solves before it.
+        For a caller whose solve side was lost (a child process that ended; to move the
+        solving elsewhere with its state, :meth:`hand_over`): the next observation resets the
+        bodies and the focal estimate of whichever side solves it, and nothing is carried from
+        solves before it.
         """
         self._pending_resets |= {'bodies', 'focal'}
         self._running = None
         self._focal_now = None
+
+    def hand_over(self) -> SolveSide:
+        """
+        Return the solve side's state, for a pipeline that solves from now on instead.
+
+        For a caller that moves the solving elsewhere (another process, or back): the other
+        pipeline's :meth:`take_over` goes on with the same body ids, count, focal estimate and
+        running fit, where :meth:`forget_solves` would restart them. This one's solve side is
+        left as it is (stale: do not solve here until it takes a state back).
+        """
+        return SolveSide(self.bodies, self._count, self._counted_ids,
+                         (list(self._focal_samples), self._focal, self._focal_evidence_stamp,
+                          self._focal_now), self._running)
+
+    def take_over(self, side: SolveSide) -> None:
+        """
+        Solve from ``side`` on (another pipeline's :meth:`hand_over`), with this one's method.
+
+        The warm starts restart (they belong to the method that made them) and a lane's job
+        in flight is dropped; the body ids, the count and the focal estimate go on.
+        """
+        self._generation += 1
+        self._warm.reset()
+        self.bodies, self._count, self._counted_ids = side.bodies, side.count, side.counted_ids
+        samples, self._focal, self._focal_evidence_stamp, self._focal_now = side.focal
+        self._focal_samples = list(samples)
+        self._running = side.running
 
     @property
     def lane(self) -> Any:

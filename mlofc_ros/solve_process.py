@@ -23,14 +23,15 @@ its image) to a pipeline in the child that only solves, waits for its
 :class:`~mlofc_ros.frame.FrameResult`, and hands the child's
 :class:`~mlofc_ros.pipeline.SolveState` (the running fit for carried frames, the focal length)
 to the parent. The solve side's state (body ids, warm starts, count, focal estimate) lives in
-the child. The child is ``python -m mlofc_ros.solve_process`` (the parent's interpreter and
-environment) in a process group of its own, talking over a socket pair: it ends when told to, or
-when the parent's end closes (the parent ended, however). Its full solves (a search: 1-2 s)
-and rescans run in one more child of its own, a solver lane
-(:class:`ProcessLane`, :mod:`mlofc_ros.lane`), while it steps the frames from the running fit
-(about 20 ms each): a live node at 30 Hz solved 15-57% of the frames when the full solves ran
-in turn, 32-70% with the lane, 75-86% with the rescans there too (bench live, own2+bg; the
-others answered from the running fit).
+the child; :meth:`SolveProcess.take_over` and :meth:`SolveProcess.hand_over` move it in and
+out when the solving moves (the body ids go on). The child is ``python -m
+mlofc_ros.solve_process`` (the parent's interpreter and environment) in a process group of its
+own, talking over a socket pair: it ends when told to, or when the parent's end closes (the
+parent ended, however). Its full solves (a search: 1-2 s) and rescans run in one more child of
+its own, a solver lane (:class:`ProcessLane`, :mod:`mlofc_ros.lane`), while it steps the
+frames from the running fit (about 20 ms each): a live node at 30 Hz solved 15-57% of the
+frames when the full solves ran in turn, 32-70% with the lane, 75-86% with the rescans there
+too (bench live, own2+bg; the others answered from the running fit).
 
 Example::
 
@@ -50,7 +51,7 @@ from typing import Any, Mapping, Optional, Tuple, TYPE_CHECKING
 if TYPE_CHECKING:                      # the child imports the pipeline after its signals
     from mlofc_ros.frame import FrameResult, Observation
     from mlofc_ros.lane import Finished, SolveJob
-    from mlofc_ros.pipeline import Pipeline
+    from mlofc_ros.pipeline import Pipeline, SolveSide
 
 #: Seconds to wait for the child to end on :meth:`SolveProcess.close` before killing it.
 CLOSE_TIMEOUT = 5.0
@@ -113,6 +114,11 @@ def _serve_requests(conn: Connection, pipeline: Optional['Pipeline']) -> None:
             elif request == 'reconfigure':
                 pipeline.reconfigure(**payload)
                 reply = None
+            elif request == 'take_over':
+                pipeline.take_over(payload)
+                reply = None
+            elif request == 'hand_over':
+                reply = pipeline.hand_over()
             else:
                 raise ValueError(f'unknown request {request!r}')
         except Exception as exc:  # noqa: B902 (reported to the parent, the child lives on)
@@ -179,6 +185,7 @@ class SolveProcess:
         self._closed = False
         self._conn: Any = None
         self._process: Optional[subprocess.Popen] = None
+        self._handed: Optional['SolveSide'] = None      # take_over's, not sent yet
         self._start()
 
     def _start(self) -> None:
@@ -219,8 +226,12 @@ class SolveProcess:
         and ``pipeline`` told to forget the solves (body ids restart).
         """
         try:
+            if self._handed is not None:
+                self._call('take_over', self._handed)
+                self._handed = None
             result, state = self._call('solve', dataclasses.replace(obs, gray=None))
         except SolverProcessEnded:
+            self._handed = None
             pipeline.forget_solves()        # the new child starts without the solve state
             raise
         pipeline.adopt(state)
@@ -230,6 +241,22 @@ class SolveProcess:
         """Apply :meth:`Pipeline.reconfigure` in the child (the caller's own pipeline too)."""
         self._call('reconfigure', changes)
         self._params.update(changes)        # accepted: a restarted child starts with them
+
+    def take_over(self, side: 'SolveSide') -> None:
+        """
+        Have the child solve from ``side`` on (:meth:`Pipeline.take_over`).
+
+        Sent with the next :meth:`solve` (this returns at once, even while the child starts);
+        a child that ends before then starts without it, as after any restart.
+        """
+        self._handed = side
+
+    def hand_over(self) -> 'SolveSide':
+        """Return the child's solve side (:meth:`Pipeline.hand_over`), to solve elsewhere."""
+        if self._handed is not None:                    # not sent yet: still ours
+            side, self._handed = self._handed, None
+            return side
+        return self._call('hand_over', None)
 
     @property
     def alive(self) -> bool:

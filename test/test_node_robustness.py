@@ -584,7 +584,7 @@ def test_a_slow_method_solves_in_a_child_process_and_moves_back_on_a_method_chan
     s = h.mlofc.stats
     assert s['processed'] + s['unsolved'] == 6 and s['dropped'] == s['unsolved'], s
     assert np.sum(clouds[-1] >= 0) > 10
-    # a fast method solves here again: the child ends, the body ids restart
+    # a fast method solves here again: the child ends, the body ids go on
     assert h.set_params(method='robust')[0].successful
     labels = parse_segments_msg(h.frame(image_msg(seq.frames[6], seq.stamps[6])))[2]
     assert np.sum(labels >= 0) > 10
@@ -617,22 +617,39 @@ def test_method_auto_moves_to_the_general_model_in_a_child_once_bodies_translate
         return {v.key: v.value for v in got[-1].values}[key] if got else ''
     assert h.wait(lambda: status('solver method') == 'robust', 5.0), status('solver method')
     assert status('solver') == 'thread' and status('window fill') == '0/10'
-    clouds = [parse_segments_msg(h.frame(image_msg(seq.frames[k], seq.stamps[k])))[2]
+    # the general model's child waits from the start, so that the switch solves at once
+    standby = h.mlofc._standby
+    assert standby is not None and standby.alive
+    clouds = [parse_segments_msg(h.frame(image_msg(seq.frames[k], seq.stamps[k])))
               for k in range(len(seq.frames))]
     # the rotation model misfits the boxes: after a few full windows, the general model in a
-    # child process; the parameter stays 'auto'
+    # child process (the one waiting); the parameter stays 'auto'
     assert h.wait(lambda: bool(h.infos('method auto: the rotation model misfits')))
     assert h.wait(lambda: status('solver method') == 'general', 5.0)
-    assert h.wait(lambda: status('solver').startswith('child process '), 5.0)
+    assert h.wait(lambda: status('solver') == f'child process {standby.pid}', 5.0)
+    assert h.mlofc._standby is None
     assert h.mlofc.get_parameter('method').value == 'auto'
     s = h.mlofc.stats
     assert s['processed'] + s['unsolved'] == len(seq.frames) and s['errors'] == 0, s
-    assert np.sum(clouds[3] >= 0) > 10               # the rotation model's, before
-    # set again, 'auto' starts from the rotation model, solved here
+    assert np.sum(clouds[3][2] >= 0) > 10            # the rotation model's, before
+    # the body ids go on across the switch: a track keeps its id (the child's first answers
+    # are carried from the rotation model's last ones until its search is back)
+    last = clouds[-1]
+    before = dict(zip(clouds[7][1].tolist(), clouds[7][2].tolist()))
+    same = [before[t] == lab for t, lab in zip(last[1].tolist(), last[2].tolist())
+            if before.get(t, -1) >= 0 and lab >= 0]
+    assert len(same) > 10 and np.mean(same) > 0.5, same
+    # set again, 'auto' starts from the rotation model, solved here; the general model's
+    # child waits again
     assert h.set_params(method='auto')[0].successful
     h.frame(image_msg(seq.frames[0], seq.stamps[-1] + 1.0))
     assert h.wait(lambda: status('solver') == 'thread', 5.0), status('solver')
     assert status('solver method') == 'robust'
+    assert h.mlofc._standby is standby and standby.alive
+    # a method without a standby ends it
+    assert h.set_params(method='robust')[0].successful
+    h.frame(image_msg(seq.frames[1], seq.stamps[-1] + 2.0))
+    assert h.wait(lambda: not standby.alive, 5.0)
 
 
 def test_a_solver_process_that_keeps_dying_is_given_up_for_a_thread(harness):

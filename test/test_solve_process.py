@@ -48,6 +48,42 @@ def test_a_child_solves_as_the_pipeline_itself_and_hands_back_its_state():
     remote.close()                                      # idempotent
 
 
+def test_the_solve_side_moves_into_a_child_and_back_with_its_body_ids():
+    seq = small_sequence(12)
+    params = {'num_bodies': 2, 'window': 5, 'focal_length': 300.0}
+    here, observing = Pipeline(**params), Pipeline(**params)
+    before = [here.process(gray, t) for gray, t in zip(seq.frames[:6], seq.stamps[:6])]
+    for gray, t in zip(seq.frames[:6], seq.stamps[:6]):
+        observing.solve(observing.observe(gray, t))
+    known = set(observing.bodies.track_labels)
+    with SolveProcess(dict(observing.params, method='general'), lane=False) as remote:
+        remote.take_over(observing.hand_over())         # sent with the first solve
+        r = remote.solve(observing.observe(seq.frames[6], seq.stamps[6]), observing)
+        side = remote.hand_over()
+        # the child went on from the tracks' histories here, even those of tracks it has
+        # not seen (the body ids restarted would have only its own window's)
+        assert known - set(r.track_ids.tolist())
+        assert known <= set(side.bodies.track_labels)
+        # the child's bodies keep the ids they had here: the same tracks, the same ids
+        prev = dict(zip(before[-1].track_ids.tolist(), before[-1].labels.tolist()))
+        both = [(prev[t], lab) for t, lab in zip(r.track_ids.tolist(), r.labels.tolist())
+                if prev.get(t, -1) >= 0 and lab >= 0]
+        assert len(both) > 10
+        assert np.mean([a == b for a, b in both]) > 0.9
+    # and back: this pipeline solves on from the child's state, with the same ids
+    observing.take_over(side)
+    again = observing.solve(observing.observe(seq.frames[7], seq.stamps[7]))
+    prev = dict(zip(r.track_ids.tolist(), r.labels.tolist()))
+    both = [(prev[t], lab) for t, lab in zip(again.track_ids.tolist(), again.labels.tolist())
+            if prev.get(t, -1) >= 0 and lab >= 0]
+    assert len(both) > 10 and np.mean([a == b for a, b in both]) > 0.9
+    # a state handed over but not sent yet is still the caller's
+    with SolveProcess(observing.params, lane=False) as remote:
+        handed = observing.hand_over()
+        remote.take_over(handed)
+        assert remote.hand_over() is handed
+
+
 def test_an_unknown_focal_length_estimated_in_the_child_reaches_the_observations():
     seq = small_sequence(FOCAL_SAMPLES + 3)
     observing = Pipeline(num_bodies=2, window=3)
