@@ -57,6 +57,18 @@ def test_score_frame_finds_the_moving_body() -> None:
     assert math.isnan(s['still_other'])
 
 
+def test_the_hand_region_is_left_out_of_the_second_score() -> None:
+    # frame 5 against frame 0: track 1 (midpoint u 5, v 5: in the hand's region) and track 2
+    # (u 405) both move 3 px across themselves; left out, track 1 is neither moving nor still
+    first = _result([1, 2], [[0, 5, 10, 5], [400, 5, 410, 5]])
+    moved = _result([1, 2], [[0, 8, 10, 8], [400, 8, 410, 8]], labels=[0, 1])
+    results = {0: first, real.LAG: moved}
+    every = real.score_run(results, 2.0)
+    handless = real.score_run(results, 2.0, leave_out=real.HAND_REGION)
+    assert [s['frame'] for s in every] == [real.LAG] and every[0]['moving'] == 2
+    assert handless[0]['moving'] == 1 and handless[0]['on_body'] == 1.0
+
+
 def test_summary_reads_the_goal_on_the_moving_phase() -> None:
     # frame 40 is before the moving phase; frame 48 has every segment on the moving body
     shares = ((40, 0.2, 1.0), (48, 1.0, 0.0), (49, 0.95, 1.0), (50, 0.5, 1.0))
@@ -80,8 +92,9 @@ def test_real_quick_writes_report_and_picture(tmp_path: pathlib.Path) -> None:
     for headers in (real.SUMMARY_HEADERS, real.FRAME_HEADERS):
         assert '| ' + ' | '.join(headers) + ' |' in lines
     summary = [ln for ln in lines if ln.startswith('| robust | ')]
-    # the summary of each proxy and the per-frame rows 48, 53, 58 of frames 30-60
-    assert len(summary) == 2
+    # the summary of each proxy and without the hand, and the per-frame rows 48, 53, 58 of
+    # frames 30-60
+    assert len(summary) == 3 and '## The same runs without the hand' in lines
     rows = [ln.split('|')[1].strip() for ln in lines if re.match(r'\| \d+ \| robust \|', ln)]
     assert rows == ['48', '53', '58']
     png = tmp_path / 'visp_cube.png'

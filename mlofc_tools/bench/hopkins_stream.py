@@ -25,7 +25,8 @@ line tracks are built once, in the sequence's first frame
 (:func:`mlofc_tools.datasets.hopkins.line_tracks` with all frames, the same pairing rules as
 `bench hopkins`), and go frame by frame through
 :meth:`mlofc_ros.pipeline.Pipeline.process_lines` (``method='general'``, or each of
-``--methods``; ``window`` K = 5, the node's other defaults): the node's own solve path, body
+``--methods``; ``window`` K = 5 or ``--window``, 0 being each method's own as the node's
+default; the node's other defaults): the node's own solve path, body
 ids and all. The first frames, until the window holds ``solver.methods.GENERAL_MIN_FRAMES``,
 are solved rotation-only; then the first full window is searched (from those labels too) and
 every later one is warm-started (from the previous labels and from every track reassigned at
@@ -60,21 +61,24 @@ QUICK_SEQUENCE = 'three-cars'
 
 
 def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
-                    cold: bool = True, method: str = 'general') -> Dict[str, object]:
+                    cold: bool = True, method: str = 'general', window: int = K
+                    ) -> Dict[str, object]:
     """
     Stream one sequence through the warm path; per-window misclassification (worker).
 
     ``windows``: stop after this many (default: to the end of the sequence); ``cold=False``
     skips the cold reference solves; ``method``: the pipeline's (the cold reference is
-    always ``'general'``).
+    always ``'general'``); ``window``: the pipeline's ``window`` parameter (0: the method's
+    own, the node's default), frames; the cold reference solves windows as long.
 
     Returns a record: ``name``, ``method``, ``n``, ``frames``, ``lines``, ``stream`` (the
     misclassification of every window, first to last), ``cold_mid`` / ``cold_last`` (the
     cold search at the middle / last window), ``cpu_warm`` (median CPU s per warm solve).
     """
-    from mlofc_ros.pipeline import Pipeline
+    from mlofc_ros.pipeline import Pipeline, window_frames
     from mlofc_ros.solver import segment_lines
 
+    size = window_frames({'window': window, 'method': method})
     seq = hk.load_sequence(path)
     n = seq.n_motions
     s = int(np.random.SeedSequence([seed, zlib.crc32(seq.name.encode())])
@@ -83,22 +87,22 @@ def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
                                    max_uses=MAX_USES)
     frames = tracks.shape[1]
     ids = np.arange(tracks.shape[0])
-    pipe = Pipeline(num_bodies=n, window=K, method=method, seed=s)
+    pipe = Pipeline(num_bodies=n, window=window, method=method, seed=s)
     stream, cpu = [], []
-    end = frames if windows is None else min(frames, K + windows - 1)
+    end = frames if windows is None else min(frames, size + windows - 1)
     for t in range(end):                                 # frames, not lines
         c = time.process_time()
         res = pipe.process_lines(ids, tracks[:, t], t / FPS, seq.image_size)
-        if t >= K:                                       # warm solves of full windows
+        if t >= size:                                    # warm solves of full windows
             cpu.append(time.process_time() - c)
-        if t >= K - 1:
+        if t >= size - 1:
             stream.append(misclassification(res.labels, truth, n))
     rec = {'name': seq.name, 'method': method, 'group': seq.group, 'n': n, 'frames': frames,
-           'lines': int(len(truth)), 'stream': stream,
+           'lines': int(len(truth)), 'stream': stream, 'window': size,
            'cpu_warm': float(np.median(cpu)) if cpu else float('nan')}
-    last = frames - K
+    last = frames - size
     for key, start in (('cold_mid', last // 2), ('cold_last', last)) if cold else ():
-        res = segment_lines(tracks[:, start:start + K], n, intrinsics=None,
+        res = segment_lines(tracks[:, start:start + size], n, intrinsics=None,
                             image_size=seq.image_size, method='general', seed=s)
         rec[key] = misclassification(res.labels, truth, n)
     return rec
@@ -119,7 +123,8 @@ def summary_table(records: Sequence[Dict[str, object]]) -> str:
     for method, n in dict.fromkeys((r['method'], r['n'])
                                    for r in sorted(records, key=lambda r: r['n'])):
         sel = [r for r in records if r['n'] == n and r['method'] == method]
-        mid = [r['stream'][min((r['frames'] - K) // 2, len(r['stream']) - 1)] for r in sel]
+        mid = [r['stream'][min((r['frames'] - r['window']) // 2, len(r['stream']) - 1)]
+               for r in sel]
         cold = {key: [r[key] for r in sel if key in r] for key in ('cold_mid', 'cold_last')}
         lines.append(
             f'| {method} | {n} | {len(sel)} | {cell([np.mean(r["stream"]) for r in sel])} '
@@ -153,6 +158,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                         '--sequences; 0 = all)')
     p.add_argument('--windows', type=int, default=None,
                    help='stop each stream after this many windows (default: its end)')
+    p.add_argument('--window', type=int, default=K,
+                   help=f'the pipeline\'s window, frames (default {K}; 0: each method\'s own, '
+                        'the node\'s default)')
     p.add_argument('--methods', default='general',
                    help='comma-separated pipeline methods (general, auto, ...; default general)')
     p.add_argument('--quick', action='store_true',
@@ -183,7 +191,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     # cut streams (--windows) have no middle or last window to compare with
     methods = [m for m in args.methods.split(',') if m]
     # the cold reference once per sequence (it does not depend on the stream's method)
-    items = [(str(p), 155, args.windows, args.windows is None and i == 0, m)
+    items = [(str(p), 155, args.windows, args.windows is None and i == 0, m, args.window)
              for p in paths for i, m in enumerate(methods)]
     t0 = time.perf_counter()
     records = common.run_parallel(_unit, items, args.jobs, 'sequences')
@@ -192,7 +200,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         common.run_header('Hopkins155 line tracks streamed through the warm path: '
                           + ', '.join(f'`{m}`' for m in methods),
                           common.command_line('hopkins_stream', argv), {
-                              'Sequences': f'{len(paths)}; K = {K}',
+                              'Sequences': f'{len(paths)}; window '
+                                           f'{args.window or "0 (each method its own)"}',
                               'Run time': f'{seconds:.0f} s wall with {args.jobs} worker '
                                           'process(es)'}),
         __doc__.split('\n\n', 2)[2].strip(), '',
