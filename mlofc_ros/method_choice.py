@@ -133,19 +133,19 @@ class MethodChoice:
         self.method, self.ratio = ROTATION_METHOD, None
         self._ratios.clear()
 
-    def add(self, residuals: np.ndarray, tracks: np.ndarray) -> bool:
+    def add(self, residuals: np.ndarray, jitter: float) -> bool:
         """
-        Take a rotation-model solve: its tracks' ``residuals`` and its window's ``tracks``.
+        Take a rotation-model solve: its tracks' ``residuals`` and their ``jitter``.
 
         ``residuals (N,)`` px (``SegmentationResult.residuals``: each track's rms residual
-        under its body, NaN for unusable tracks); ``tracks (N, K, 4)`` px as solved. Returns
-        True when this solve made the switch.
+        under its body, NaN for unusable tracks); ``jitter`` px: :func:`track_jitter` of the
+        window's tracks as solved (NaN: too few to tell). Returns True when this solve made
+        the switch.
         """
         if self.method != ROTATION_METHOD:
             return False
         residuals = np.asarray(residuals, dtype=float)
         usable = residuals[np.isfinite(residuals)]
-        jitter = track_jitter(tracks)
         if len(usable) < MIN_JITTER_TRACKS or not (np.isfinite(jitter) and jitter > 0):
             return False
         self._ratios.append(float(np.median(usable)) / jitter)

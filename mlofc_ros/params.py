@@ -97,7 +97,9 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               'Number of independently moving rigid bodies, the static background counting as '
               'one; 0 = found from the scene and kept up as bodies start, stop and leave '
               '(a new body gets an id no body held in the last minute, one that stops the '
-              "background's).",
+              "background's). A count given is the most: bodies the rotation model cannot "
+              'tell apart (a still scene, a body that stops) are published as one, under the '
+              'older id (mlofc_ros.alike).',
               range=(0, 8)),
     ParamSpec('window', int, 0,
               'Sliding window length in frames; the solver runs on the last `window` frames at '

@@ -36,6 +36,7 @@ from typing import (Any, Deque, Dict, FrozenSet, List, Mapping, NamedTuple, Opti
                     Set, Tuple)
 
 from mlofc_ros import params as _params
+from mlofc_ros.alike import AlikeBodies, cross_ratios
 from mlofc_ros.bodies import BodyTracker, relabel
 from mlofc_ros.camera import as_camera, CameraLike, CameraModel
 from mlofc_ros.counting import BodyCount, compact_labels
@@ -43,7 +44,8 @@ from mlofc_ros.frame import (centred_intrinsics, check_image_size, check_lines, 
                              invalid_bodies, lookup, Observation, ray_intrinsics, segment_rays,
                              TIMING_KEYS, unsolved_fields)
 from mlofc_ros.lane import Finished, SolveJob
-from mlofc_ros.method_choice import AUTO, MethodChoice, TRANSLATION_METHOD
+from mlofc_ros.method_choice import (AUTO, MethodChoice, MIN_JITTER_FRAMES, ROTATION_METHOD,
+                                     track_jitter, TRANSLATION_METHOD)
 from mlofc_ros.solver import get_method, Method, segment_lines, SegmentationResult, StepNotTaken
 from mlofc_ros.solver.focal import focal_evidence, FOCAL_PRIOR_LOG_SIGMA, FocalEstimate
 from mlofc_ros.solver.warm import result_motions, WarmStarts
@@ -189,6 +191,10 @@ class Pipeline:
         # method='auto': the method it solves with now (the rotation model until the scene
         # translates)
         self._choice = MethodChoice()
+        # the rotation model's bodies that move alike, published as one; the tracks' jitter
+        # of the last rotation-model solve (px), which both read
+        self._alike = AlikeBodies()
+        self._jitter = math.nan
 
     # --- configuration -------------------------------------------------------------------
 
@@ -253,6 +259,7 @@ class Pipeline:
         self._generation += 1
         self.bodies.reset()
         self._warm.reset()
+        self._alike.reset()
         self._count.reset()
         self._counted_ids = None
 
@@ -720,6 +727,7 @@ class Pipeline:
         """
         self._generation += 1
         self._warm.reset()
+        self._alike.reset()
         self.bodies, self._count, self._counted_ids = side.bodies, side.count, side.counted_ids
         samples, self._focal, self._focal_evidence_stamp, self._focal_now = side.focal
         self._focal_samples = list(samples)
@@ -816,9 +824,12 @@ class Pipeline:
             problems.append(f'solver failed: {type(exc).__name__}: {exc}')
             return None
         self._warm.solved(method, res, obs.stamp, obs.frame_interval)
+        self._jitter = math.nan
+        if res.method == ROTATION_METHOD and tracks.shape[1] >= MIN_JITTER_FRAMES:
+            self._jitter = track_jitter(tracks)
         if (auto and method.name == self._choice.method
                 and tracks.shape[1] >= min(method.window, self._window.size)):
-            self._choice.add(res.residuals, tracks)
+            self._choice.add(res.residuals, self._jitter)
         return res
 
     def _step_beside_lane(self, obs: Observation, method: Method, n: int, lane: Any,
@@ -953,6 +964,13 @@ class Pipeline:
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)
         labels, carried = self._segment_labels(obs, res.labels, mapping)
+        if res.method == ROTATION_METHOD and res.costs is not None:
+            # bodies the rotation model cannot tell apart: one body, the older id, one twist
+            into = self._alike.add(mapping, cross_ratios(res.costs, res.labels, res.residuals,
+                                                         self._jitter))
+            for young, old in into.items():                  # bodies, not lines
+                v_out[young] = False
+                labels[labels == young] = old
         self._running = RunningFit(obs.epoch, np.array(obs.track_ids), labels,
                                    float(res.focal_length), focal_log_sigma, n_out)
         self._refine_focal(obs, res, problems)

@@ -70,15 +70,15 @@ def test_the_choice_moves_on_the_median_of_a_few_windows_and_for_good():
     high = residuals(3.0 * MISFIT_RATIO * jitter)
     # one poor window among good ones: no switch
     for r in [high] + [residuals(0.5 * jitter)] * (2 * MISFIT_SOLVES):
-        assert not choice.add(r, tracks)
+        assert not choice.add(r, track_jitter(tracks))
     assert choice.method == 'robust' and choice.ratio is None
     # too few usable residuals or tracks are not counted
-    assert not choice.add(np.full(50, np.nan), tracks)
-    assert not choice.add(high[:5], tracks[:5])
-    switched = [choice.add(high, tracks) for _ in range(MISFIT_SOLVES)]
+    assert not choice.add(np.full(50, np.nan), track_jitter(tracks))
+    assert not choice.add(high[:5], track_jitter(tracks[:5]))
+    switched = [choice.add(high, track_jitter(tracks)) for _ in range(MISFIT_SOLVES)]
     assert switched.index(True) == MISFIT_SOLVES // 2 and sum(switched) == 1
     assert choice.method == TRANSLATION_METHOD and choice.ratio > MISFIT_RATIO
-    assert not choice.add(residuals(0.1 * jitter), tracks)
+    assert not choice.add(residuals(0.1 * jitter), track_jitter(tracks))
     assert choice.method == TRANSLATION_METHOD
     choice.reset()
     assert choice.method == 'robust' and choice.ratio is None

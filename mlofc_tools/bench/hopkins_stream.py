@@ -159,8 +159,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--windows', type=int, default=None,
                    help='stop each stream after this many windows (default: its end)')
     p.add_argument('--window', type=int, default=K,
-                   help=f'the pipeline\'s window, frames (default {K}; 0: each method\'s own, '
-                        'the node\'s default)')
+                   help=f"the pipeline's window, frames (default {K}; 0: each method's own, "
+                        "the node's default)")
     p.add_argument('--methods', default='general',
                    help='comma-separated pipeline methods (general, auto, ...; default general)')
     p.add_argument('--quick', action='store_true',

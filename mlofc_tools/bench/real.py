@@ -521,9 +521,9 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], runs: Dict[str, 
              '(window full); mean / LSD: mean `Pipeline.process` over median LSD.', '',
              '## The same runs without the hand', '',
              common.markdown_table(SUMMARY_HEADERS[:10], handless),
-             f'The {args.proxy} proxy on the segments outside the hand\'s region (midpoint '
+             f"The {args.proxy} proxy on the segments outside the hand's region (midpoint "
              f'u < {HAND_REGION[0]:.0f} px and v < {HAND_REGION[1]:.0f} px, where the dragging '
-             'hand stays through the moving phase; the cylinder\'s top is there too). The '
+             "hand stays through the moving phase; the cylinder's top is there too). The "
              'hand is a third motion, and not rigid; the goal names the sheet, cube and '
              'cylinder. From about frame 66 the sheet pauses while the hand moves on alone: '
              'with two bodies the hand then goes with the background or with the sheet, and '
