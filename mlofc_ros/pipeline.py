@@ -964,8 +964,9 @@ class Pipeline:
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)
         labels, carried = self._segment_labels(obs, res.labels, mapping)
-        if res.method == ROTATION_METHOD and res.costs is not None:
-            # bodies the rotation model cannot tell apart: one body, the older id, one twist
+        if not counted and res.method == ROTATION_METHOD and res.costs is not None:
+            # a count given is the most: bodies the rotation model cannot tell apart are one
+            # body, the older id, one twist (the automatic count merges by its own score)
             into = self._alike.add(mapping, cross_ratios(res.costs, res.labels, res.residuals,
                                                          self._jitter))
             for young, old in into.items():                  # bodies, not lines
