@@ -26,7 +26,7 @@ under the older stable id and no twist for the other; the solver and the body id
 (when they move apart again, the younger id comes back). Measured (the larger of the two
 ratios, per window, rotation model, 5 frames): visp_cube before its drag 0.9-2.2 in most
 windows, 3-6 in two stretches (frames 12-14 and 23-27, whose groups are spread over the
-still table: left split), 3.6-6 in the drag's first window; rendered boxes turning about
+still table: left split), about 6 in the drag's first window; rendered boxes turning about
 the camera 100-700.
 
 Only the rotation model's bodies are compared: the general model's differ in translation too,
@@ -87,10 +87,11 @@ def cross_ratios(costs: np.ndarray, labels: np.ndarray, residuals: np.ndarray,
         dof = own / np.asarray(residuals, dtype=float) ** 2      # the cost's rows
         rms = np.sqrt(costs / dof[:, None]) / jitter             # (N, n)
     usable = (labels >= 0) & np.isfinite(dof) & (dof > 0)
+    rms[np.isnan(rms)] = np.inf                  # a track a body cannot explain at all
     for b in range(n):                                           # bodies, not lines
         mine = usable & (labels == b)
         if np.count_nonzero(mine) >= ALIKE_MIN_TRACKS:
-            out[:, b] = np.nanmedian(rms[mine], axis=0)
+            out[:, b] = np.median(rms[mine], axis=0)
     np.fill_diagonal(out, np.nan)
     return out
 
@@ -99,8 +100,8 @@ class AlikeBodies:
     """
     Which stable bodies move alike now, over the last windows (not thread-safe).
 
-    Feed it every rotation-model solve (:meth:`add`); :meth:`published` says which stable id
-    each body's tracks are published under.
+    Feed it every rotation-model solve (:meth:`add`): it returns the older stable id that each
+    body alike with it is published under.
     """
 
     def __init__(self) -> None:

@@ -469,9 +469,16 @@ class MlofcNode(Node):
         wanted = process and get_method(self._method).slow
         standby = process and not wanted and self._pipeline.params['method'] == AUTO
         if self._remote is not None and changes:
-            self._remote.reconfigure(**dict(changes, method=self._remote_method))
+            # the method it solves with from now on, or until it is closed or waits
+            method = self._method if wanted else self._remote_method
+            self._remote.reconfigure(**dict(changes, method=method))
+            self._remote_method = method
         if self._standby is not None and changes:
-            self._standby.reconfigure(**dict(changes, method=TRANSLATION_METHOD))
+            try:
+                self._standby.reconfigure(**dict(changes, method=TRANSLATION_METHOD))
+            except SolverProcessError:
+                self._standby.close()           # it ended while it waited: a new one below
+                self._standby = None
         if not wanted and self._remote is not None:
             remote, self._remote = self._remote, None
             self._take_solve_side(remote)

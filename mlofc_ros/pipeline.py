@@ -825,7 +825,8 @@ class Pipeline:
             return None
         self._warm.solved(method, res, obs.stamp, obs.frame_interval)
         self._jitter = math.nan
-        if res.method == ROTATION_METHOD and tracks.shape[1] >= MIN_JITTER_FRAMES:
+        if (res.method == ROTATION_METHOD and tracks.shape[1] >= MIN_JITTER_FRAMES
+                and (auto or n_req > 0)):                # the choice's or the alike bodies'
             self._jitter = track_jitter(tracks)
         if (auto and method.name == self._choice.method
                 and tracks.shape[1] >= min(method.window, self._window.size)):

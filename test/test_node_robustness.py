@@ -652,6 +652,23 @@ def test_method_auto_moves_to_the_general_model_in_a_child_once_bodies_translate
     assert h.wait(lambda: not standby.alive, 5.0)
 
 
+def test_method_autos_waiting_child_that_ended_is_replaced(harness):
+    seq = small_sequence(4)
+    h = harness('/rob_standby', warn_period=0.0, focal_length=300.0)     # method auto
+    standby = h.mlofc._standby
+    assert standby is not None and standby.alive
+    os.kill(standby.pid, 9)
+    assert h.wait(lambda: not standby.alive, 5.0)
+    # a change of a pipeline parameter reaches the waiting child: a dead one is replaced,
+    # and the frames go on without an error
+    assert h.set_params(min_segment_length=25.0)[0].successful
+    for k in range(4):
+        h.frame(image_msg(seq.frames[k], seq.stamps[k]))
+    again = h.mlofc._standby
+    assert again is not None and again is not standby and again.alive
+    assert h.mlofc.stats['errors'] == 0 and not h.warnings('failed')
+
+
 def test_a_solver_process_that_keeps_dying_is_given_up_for_a_thread(harness):
     seq = small_sequence(12)
     h = harness('/rob_die', method='general', window=5, focal_length=300.0, warn_period=0.0)
