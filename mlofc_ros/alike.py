@@ -123,11 +123,12 @@ class AlikeBodies:
         self._ratios = {k: v for k, v in self._ratios.items() if k[0] in ids and k[1] in ids}
         for a in range(len(ids)):                                # bodies, not lines
             for b in range(a + 1, len(ids)):
-                worse = np.nanmax([ratios[a, b], ratios[b, a]]) \
-                    if np.any(np.isfinite([ratios[a, b], ratios[b, a]])) else np.nan
-                if np.isfinite(worse):
+                pair = ratios[[a, b], [b, a]]
+                pair = pair[~np.isnan(pair)]       # inf (tracks the other cannot explain) counts
+                if pair.size:
                     key = (min(ids[a], ids[b]), max(ids[a], ids[b]))
-                    self._ratios.setdefault(key, deque(maxlen=ALIKE_SOLVES)).append(worse)
+                    self._ratios.setdefault(key, deque(maxlen=ALIKE_SOLVES)).append(
+                        float(pair.max()))
         into: Dict[int, int] = {}
         for (old, young), seen in sorted(self._ratios.items()):
             if (len(seen) >= ALIKE_MIN_SOLVES and float(np.median(seen)) <= ALIKE_RATIO

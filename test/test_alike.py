@@ -48,6 +48,16 @@ def test_alike_bodies_merge_into_the_older_id_after_a_few_windows():
     for _ in range(3):
         alike.add(ids, far)
     assert alike.add(ids, far) == {}
+    # a pair that drifts apart until one body's tracks cannot be explained by the other's
+    # motion at all (an infinite ratio) is apart again
+    alike.reset()
+    for _ in range(ALIKE_MIN_SOLVES):
+        alike.add(ids, near)
+    apart = near.copy()
+    apart[0, 1] = np.inf
+    for _ in range(ALIKE_MIN_SOLVES):
+        merged = alike.add(ids, apart)
+    assert merged == {}
     # a chain goes to the oldest; a body gone forgets its pairs
     chain = np.full((3, 3), 1.0)
     np.fill_diagonal(chain, np.nan)
