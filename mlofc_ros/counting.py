@@ -296,12 +296,15 @@ class BodyCount:
         32 -> 53 / 35%, 21.8 / 32.4 -> 20.7 / 30.4%; bench count's scheduled stream the same.
         """
         labels = np.asarray(res.labels)
+        costs = np.asarray(res.costs, dtype=float)
         held = (labels >= 0) & (dof > 0)
+        # a track the body has no cost for (NaN: 'general' with two frames) tells nothing
+        held[held] = np.isfinite(costs[held, labels[held]])
         if not held.any():
             return res
         # each body's median cost per equation under its own motion
-        own = np.asarray(res.costs, dtype=float)[np.flatnonzero(held), labels[held]] / dof[held]
-        fit = [float(np.nanmedian(own[labels[held] == b])) if np.any(labels[held] == b)
+        own = costs[held, labels[held]] / dof[held]
+        fit = [float(np.median(own[labels[held] == b])) if np.any(labels[held] == b)
                else -np.inf for b in range(self.n)]                  # bodies, not lines
         loose = labels == int(np.argmax(fit))
         trial = _trial(solve, self.n + 1, np.where(loose, -1, labels), current + [-1])
