@@ -969,7 +969,8 @@ class Pipeline:
             # a count given is the most: bodies the rotation model cannot tell apart are one
             # body, the older id, one twist (the automatic count merges by its own score)
             into = self._alike.add(mapping, cross_ratios(res.costs, res.labels, res.residuals,
-                                                         self._jitter))
+                                                         self._jitter),
+                                   obs.win_ids, relabel(res.labels, mapping))
             for young, old in into.items():                  # bodies, not lines
                 v_out[young] = False
                 labels[labels == young] = old
