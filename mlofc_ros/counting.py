@@ -21,8 +21,9 @@ body more or one less scores better:
 
 - **one less** (a body stops and joins the still scene, two bodies move alike, a body leaves
   the view and keeps only a few tracks): tried at once for the body with the fewest tracks
-  when it has fewer than the smallest body allowed in the window's newest frame (scored on
-  the tracks in view: one that left keeps tracks in the older frames), else every
+  when it has fewer than the smallest body allowed in view (seen in the window's last
+  :data:`IN_VIEW_FRAMES` frames; scored on the tracks in view: one that left keeps tracks in
+  the older frames), else every
   :data:`MERGE_EVERY` solves for
   the pair of bodies whose angular velocities are closest within their covariances
   (:data:`MERGE_CHI2`), the later body's tracks given to the earlier (or unlabelled);
@@ -54,6 +55,7 @@ from mlofc_ros.solver import SegmentationResult
 from mlofc_ros.solver.model_selection import (bic_score, explained, MAX_BODIES, min_body_lines,
                                               track_dof, unexplained)
 from mlofc_ros.solver.robust import noise_sigma
+from mlofc_ros.tracks.tracker import MAX_MISSES
 import numpy as np
 
 #: Solves between two tries of one more body while tracks stay unexplained.
@@ -86,11 +88,26 @@ SCORE_MARGIN = 10.0
 #: misclassified 20.7 / 30.4 -> 17.0 / 30.1%; 'robust' 57 / 38 -> 58 / 38%, 17.3 / 24.6 ->
 #: 17.2 / 24.6%; bench count's scheduled stream the same with both.
 SCORE_UNEXPLAINED = 0.25
+#: A track is in view while seen in one of the window's last this many frames: the tracker
+#: reports a track again after up to MAX_MISSES frames unseen (it coasts, then retires), so
+#: a body whose lines all miss a frame keeps its id; one that left goes that much later.
+IN_VIEW_FRAMES = MAX_MISSES + 1
 
 #: ``solve(n, init_labels, bodies)``: a warm solve of the window at ``n`` bodies from labels
 #: in ``0..n-1`` (``-1`` unknown), body ``i`` continuing the current body ``bodies[i]`` (``-1``:
 #: a new one); the automatic count's search when ``n == 0`` (labels and bodies None).
 Solve = Callable[[int, Optional[np.ndarray], Optional[Sequence[int]]], SegmentationResult]
+
+
+def in_view(tracks: np.ndarray) -> np.ndarray:
+    """
+    Return which tracks are in view: seen in any of the window's last :data:`IN_VIEW_FRAMES`.
+
+    ``tracks (N, K, 4)`` px, NaN where unseen; returns ``(N,)`` bool. A body whose lines all
+    miss a frame or two (blur, a passing occluder) is still in view, as its tracks are to the
+    tracker, and keeps its id.
+    """
+    return np.isfinite(np.asarray(tracks)[:, -IN_VIEW_FRAMES:, 0]).any(axis=1)
 
 
 def merge_candidate(res: SegmentationResult, dof: np.ndarray, pairs: bool = True,
@@ -100,8 +117,8 @@ def merge_candidate(res: SegmentationResult, dof: np.ndarray, pairs: bool = True
     Return the labels of the count one less worth a try, the body gone and the one kept.
 
     The body with the fewest tracks when it holds fewer than :func:`min_body_lines` (its
-    tracks unlabelled, none kept: -1), counting only the ``visible (N,)`` tracks (seen in
-    the window's newest frame) when given: a body that left the view keeps its tracks in the
+    tracks unlabelled, none kept: -1), counting only the ``visible (N,)`` tracks (in view:
+    :func:`in_view`) when given: a body that left the view keeps its tracks in the
     window's older frames; else (with ``pairs``) the pair of bodies closest in
     angular velocity within :data:`MERGE_CHI2`, the later body's tracks given to the earlier
     (bodies in the order of their stable ids: the older id is kept, so a body that stops
@@ -236,7 +253,7 @@ class BodyCount:
         # a body below the smallest size is tried at once (a body whose object left the view
         # keeps a few tracks for a solve or two, then takes others': bench count's general
         # stream kept it for good), a pair moving alike every merge_every-th solve
-        visible = np.isfinite(np.asarray(tracks)[:, -1, 0])
+        visible = in_view(tracks)
         merged = (merge_candidate(res, dof, pairs=self._since_merge >= self.merge_every,
                                   visible=visible)
                   if settled or self._last != 'birth' else None)

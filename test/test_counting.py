@@ -17,8 +17,8 @@ from typing import List
 
 from mlofc_ros.bodies import BodyTracker
 from mlofc_ros.counting import (birth_candidate, BodyCount, compact_labels, HOLD,
-                                merge_candidate, MERGE_CHI2, score_noise, SEARCH_EVERY,
-                                split_pair)
+                                in_view, IN_VIEW_FRAMES, merge_candidate, MERGE_CHI2,
+                                score_noise, SEARCH_EVERY, split_pair)
 from mlofc_ros.pipeline import Pipeline
 from mlofc_ros.solver import get_method
 from mlofc_ros.solver.model_selection import min_body_lines
@@ -191,8 +191,8 @@ def test_a_body_below_the_smallest_size_is_tried_at_once():
 
 def test_a_body_that_left_the_view_goes_at_once():
     """Its tracks stay in the window's older frames, but the count is of what is in view."""
-    tracks = np.zeros((100, 5, 4))
-    tracks[70:, -1] = np.nan                          # body 2's 30 tracks left the view
+    tracks = np.zeros((100, 8, 4))
+    tracks[70:, -IN_VIEW_FRAMES:] = np.nan            # body 2's 30 tracks left the view
     labels = np.repeat([0, 1, 2], [40, 30, 30])
     w = [[0, 0, 0], [0.01, 0, 0], [0, 0.01, 0]]
     fit = np.random.default_rng(1).chisquare(8, 100)
@@ -217,6 +217,16 @@ def test_a_body_that_left_the_view_goes_at_once():
     count.solve(tracks, labels, solve)
     # scored on its tracks in the window the body would stay (only it explains them)
     assert count.n == 2 and count.last_change == 'merge'
+
+    # a body whose lines all missed the newest frames (blur, an occluder) is still in view,
+    # as its tracks are to the tracker: it keeps its id
+    tracks[70:] = 0.0
+    tracks[70:, 1 - IN_VIEW_FRAMES:] = np.nan
+    assert np.all(in_view(tracks))
+    count = BodyCount(merge_every=100)
+    count.solve(tracks, None, solve)
+    count.solve(tracks, labels, solve)
+    assert count.n == 3
 
 
 def test_a_count_below_the_truth_comes_back():
