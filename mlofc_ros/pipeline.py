@@ -44,8 +44,8 @@ from mlofc_ros.frame import (centred_intrinsics, check_image_size, check_lines, 
                              invalid_bodies, lookup, Observation, ray_intrinsics, segment_rays,
                              TIMING_KEYS, unsolved_fields)
 from mlofc_ros.lane import Finished, SolveJob
-from mlofc_ros.method_choice import (AUTO, MethodChoice, MIN_JITTER_FRAMES, ROTATION_METHOD,
-                                     track_jitter, TRANSLATION_METHOD)
+from mlofc_ros.method_choice import (AUTO, MethodChoice, MIN_JITTER_FRAMES, misfit_bodies,
+                                     ROTATION_METHOD, track_jitter, TRANSLATION_METHOD)
 from mlofc_ros.solver import get_method, Method, segment_lines, SegmentationResult, StepNotTaken
 from mlofc_ros.solver.focal import focal_evidence, FOCAL_PRIOR_LOG_SIGMA, FocalEstimate
 from mlofc_ros.solver.warm import result_motions, WarmStarts
@@ -825,8 +825,8 @@ class Pipeline:
             return None
         self._warm.solved(method, res, obs.stamp, obs.frame_interval)
         self._jitter = math.nan
-        if (res.method == ROTATION_METHOD and tracks.shape[1] >= MIN_JITTER_FRAMES
-                and (auto or n_req > 0)):                # the choice's or the alike bodies'
+        if res.method == ROTATION_METHOD and tracks.shape[1] >= MIN_JITTER_FRAMES:
+            # the yardstick of the choice, the alike bodies and the misfit bodies
             self._jitter = track_jitter(tracks)
         if (auto and method.name == self._choice.method
                 and tracks.shape[1] >= min(method.window, self._window.size)):
@@ -965,6 +965,10 @@ class Pipeline:
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)
         labels, carried = self._segment_labels(obs, res.labels, mapping)
+        if res.method == ROTATION_METHOD:
+            # a body the rotation model misfits (it translates) has a biased rate: none
+            v_out[mapping[misfit_bodies(res.labels, res.residuals, self._jitter,
+                                        len(mapping))]] = False
         if not counted and res.method == ROTATION_METHOD and res.costs is not None:
             # a count given is the most: bodies the rotation model cannot tell apart are one
             # body, the older id, one twist (the automatic count merges by its own score)

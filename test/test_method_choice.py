@@ -14,8 +14,8 @@
 """``method='auto'``: the tracks' jitter, the switch to the general model, the pipeline's use."""
 import math
 
-from mlofc_ros.method_choice import (MethodChoice, MISFIT_RATIO, MISFIT_SOLVES, track_jitter,
-                                     TRANSLATION_METHOD)
+from mlofc_ros.method_choice import (MethodChoice, misfit_bodies, MISFIT_RATIO, MISFIT_SOLVES,
+                                     track_jitter, TRANSLATION_METHOD)
 from mlofc_ros.pipeline import Pipeline
 from mlofc_tools.scoring import misclassification
 import numpy as np
@@ -116,6 +116,9 @@ def test_auto_moves_to_the_general_model_once_bodies_translate():
     # the first full 5-frame window is frame 4: MISFIT_SOLVES of them decide
     first = methods.index('general')
     assert first == 4 + MISFIT_SOLVES - 1, methods
+    # meanwhile the rotation model's rates of the bodies that translate are not published
+    for r in results[4:first]:
+        assert np.count_nonzero(r.body_valid) <= 1
     assert pipe.method_choice.ratio > 3.0
     assert misclassification(results[-1].labels, truth, 2) <= 0.05
     # set again, 'auto' starts from the rotation model; other changes keep the choice; a
@@ -127,3 +130,14 @@ def test_auto_moves_to_the_general_model_once_bodies_translate():
     pipe.method_choice.method = 'general'
     pipe.reset()
     assert pipe.method == 'robust'
+
+
+def test_misfit_bodies_are_those_whose_tracks_the_rotation_model_misfits():
+    labels = np.repeat([0, 1, 2, -1], [6, 6, 3, 2])
+    residuals = np.concatenate([np.full(6, 0.5), np.full(6, 3.0), np.full(3, 9.0),
+                                [9.0, 9.0]])
+    residuals[0] = np.nan                                      # an unusable track
+    np.testing.assert_array_equal(misfit_bodies(labels, residuals, 1.0, 3),
+                                  [False, True, False])        # body 2: too few tracks
+    assert not np.any(misfit_bodies(labels, residuals, 2.0, 3))
+    assert not np.any(misfit_bodies(labels, residuals, float('nan'), 3))
