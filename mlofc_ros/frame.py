@@ -59,7 +59,8 @@ class FrameResult:
         Their covariances, (rad/s)^2; ``inf`` diagonal when undetermined.
     body_valid : (n,) bool
         True when the body's angular velocity and covariance are finite (solved this frame)
-        from at least ``MIN_BODY_TRACKS`` tracks of the window.
+        from at least ``MIN_BODY_TRACKS`` tracks of the window, and published: not where the
+        rotation model misfits the body's tracks (:func:`~mlofc_ros.method_choice.misfit_bodies`).
     timings : dict
         Milliseconds per stage: ``detect_track``, ``undistort``, ``window``, ``solve``, ``total``.
     window_fill : int
@@ -84,6 +85,10 @@ class FrameResult:
     from_running_fit : bool
         True when the frame was answered from the running fit (:meth:`.Pipeline.carry`)
         instead of a solve: every label carried, no body valid.
+    body_solved : (n,) bool
+        True when the body was solved this frame from at least ``MIN_BODY_TRACKS`` tracks of
+        the window, its twist published or not (the bodies of the frame); empty where not
+        known (:attr:`solved` then reads :attr:`body_valid`).
     rays : (M, 3) float32
         Viewing ray through every segment's midpoint at unit depth ``(x, y, 1)``, camera optical
         frame, from the undistorted segment and the intrinsics of this frame (the camera's, the
@@ -111,11 +116,12 @@ class FrameResult:
     carried: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     from_running_fit: bool = False
     rays: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.float32))
+    body_solved: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     @property
     def solved(self) -> bool:
-        """Return whether at least one body has a valid angular velocity."""
-        return bool(np.any(self.body_valid))
+        """Return whether at least one body was solved this frame."""
+        return bool(np.any(self.body_solved if self.body_solved.size else self.body_valid))
 
     @property
     def focal_observable(self) -> bool:
@@ -324,4 +330,5 @@ def unsolved_fields(obs: Observation, n_bodies: int) -> Dict[str, Any]:
     w, c, v = invalid_bodies(n_bodies)
     return {'labels': np.full(m, -1, dtype=np.int32),
             'residuals': np.full(m, np.nan, np.float32), 'angular_velocities': w,
-            'angular_covariances': c, 'body_valid': v, 'carried': np.zeros(m, dtype=bool)}
+            'angular_covariances': c, 'body_valid': v, 'body_solved': v.copy(),
+            'carried': np.zeros(m, dtype=bool)}

@@ -965,10 +965,6 @@ class Pipeline:
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)
         labels, carried = self._segment_labels(obs, res.labels, mapping)
-        if res.method == ROTATION_METHOD:
-            # a body the rotation model misfits (it translates) has a biased rate: none
-            v_out[mapping[misfit_bodies(res.labels, res.residuals, self._jitter,
-                                        len(mapping))]] = False
         if not counted and res.method == ROTATION_METHOD and res.costs is not None:
             # a count given is the most: bodies the rotation model cannot tell apart are one
             # body, the older id, one twist (the automatic count merges by its own score)
@@ -978,6 +974,11 @@ class Pipeline:
             for young, old in into.items():                  # bodies, not lines
                 v_out[young] = False
                 labels[labels == young] = old
+        solved = v_out.copy()
+        if res.method == ROTATION_METHOD:
+            # a body the rotation model misfits (it translates) has a biased rate: none
+            v_out[mapping[misfit_bodies(res.labels, res.residuals, self._jitter,
+                                        len(mapping))]] = False
         self._running = RunningFit(obs.epoch, np.array(obs.track_ids), labels,
                                    float(res.focal_length), focal_log_sigma, n_out)
         self._refine_focal(obs, res, problems)
@@ -985,6 +986,7 @@ class Pipeline:
                            np.asarray(res.residuals, dtype=np.float32), np.nan)
         return {'labels': labels, 'residuals': residuals.astype(np.float32),
                 'angular_velocities': w_out, 'angular_covariances': c_out, 'body_valid': v_out,
+                'body_solved': solved,
                 'carried': carried, 'focal_length': float(res.focal_length),
                 'focal_log_sigma': focal_log_sigma}
 

@@ -354,7 +354,7 @@ def test_a_still_scene_is_one_body():
     p = Pipeline(num_bodies=0, window=5)
     ids = np.arange(len(sc.tracks))
     counts = [int(p.process_lines(ids, sc.tracks[:, k], k / 30.0, sc.image_size,
-                                  camera=sc.intrinsics).body_valid.sum()) for k in range(20)]
+                                  camera=sc.intrinsics).body_solved.sum()) for k in range(20)]
     assert counts[1:] == [1] * 19, counts
 
 

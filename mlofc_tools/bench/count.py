@@ -103,8 +103,8 @@ REAL = {'visp_cube': (2, (30, 50, 70)), 'rubik_cube': (2, (8, 14, 20)),
 
 
 def frame_count(result: FrameResult) -> int:
-    """Return the bodies of a frame: those solved with enough tracks (a twist published)."""
-    return int(np.sum(result.body_valid))
+    """Return the bodies of a frame: those solved with enough tracks (twist published or not)."""
+    return int(np.sum(result.body_solved))
 
 
 def stream_run(seed: int, method: str, num_bodies: int = 0) -> Dict[str, Any]:
