@@ -314,9 +314,7 @@ class BodyCount:
         """
         labels = np.asarray(res.labels)
         costs = np.asarray(res.costs, dtype=float)
-        held = (labels >= 0) & (dof > 0)
-        # a track the body has no cost for (NaN: 'general' with two frames) tells nothing
-        held[held] = np.isfinite(costs[held, labels[held]])
+        held = _held(res, dof)
         if not held.any():
             return res
         # each body's median cost per equation under its own motion
@@ -409,11 +407,22 @@ def score_noise(res: SegmentationResult, dof: np.ndarray) -> Optional[float]:
     if told is not None and (np.count_nonzero(unexplained(res, told, dof))
                              <= SCORE_UNEXPLAINED * np.count_nonzero(usable)):
         return told
+    held = _held(res, dof)
+    return (noise_sigma(np.asarray(res.costs, dtype=float), np.where(held, res.labels, -1),
+                        dof) if np.any(held) else None)
+
+
+def _held(res: SegmentationResult, dof: np.ndarray) -> np.ndarray:
+    """
+    Return the tracks ``(N,)`` that tell how their body fits: labelled, usable, with a cost.
+
+    A track its body has no cost for (NaN: ``'general'`` with two frames) tells nothing.
+    """
     labels = np.asarray(res.labels)
     costs = np.asarray(res.costs, dtype=float)
-    held = (labels >= 0) & (labels < costs.shape[1]) & usable
+    held = (labels >= 0) & (labels < costs.shape[1]) & (dof > 0)
     held[held] = np.isfinite(costs[held, labels[held]])
-    return noise_sigma(costs, np.where(held, labels, -1), dof) if np.any(held) else None
+    return held
 
 
 def _reported_noise(res: SegmentationResult) -> Optional[float]:
