@@ -43,7 +43,7 @@ which its costs do not separate from the rotation (two boxes spinning alike in t
 two bodies).
 """
 from collections import deque
-from typing import Deque, Dict, Optional, Tuple
+from typing import Deque, Dict, Tuple
 
 import numpy as np
 
@@ -120,15 +120,13 @@ class AlikeBodies:
     def __init__(self) -> None:
         # per pair (older id, younger id): (ratio, share of swaps) of its last windows
         self._seen: Dict[Tuple[int, int], Deque[Tuple[float, float]]] = {}
-        self._previous: Optional[Tuple[np.ndarray, np.ndarray]] = None
 
     def reset(self) -> None:
-        """Forget every pair and the last window's labels (the body ids restart)."""
+        """Forget every pair (the body ids restart)."""
         self._seen.clear()
-        self._previous = None
 
-    def add(self, ids: np.ndarray, ratios: np.ndarray, tracks: np.ndarray,
-            labels: np.ndarray) -> Dict[int, int]:
+    def add(self, ids: np.ndarray, ratios: np.ndarray, labels: np.ndarray,
+            before: np.ndarray) -> Dict[int, int]:
         """
         Take a solve's bodies and :func:`cross_ratios`; return the merges.
 
@@ -138,10 +136,11 @@ class AlikeBodies:
             The solve's bodies' stable ids.
         ratios : (n, n) float
             Their :func:`cross_ratios`.
-        tracks : (N,) int
-            The window's track ids.
         labels : (N,) int
-            Each track's stable body id, ``-1`` none.
+            Each track of the window's stable body id, ``-1`` none.
+        before : (N,) int
+            The stable body id each track had at the solve before, ``-1`` none
+            (:meth:`~mlofc_ros.bodies.BodyTracker.previous_labels`).
 
         Returns
         -------
@@ -152,14 +151,8 @@ class AlikeBodies:
 
         """
         ids = [int(i) for i in ids]
-        tracks = np.asarray(tracks)
-        labels = np.asarray(labels)
-        previous, self._previous = self._previous, (tracks, labels)
+        now, before = np.asarray(labels), np.asarray(before)
         self._seen = {k: v for k, v in self._seen.items() if k[0] in ids and k[1] in ids}
-        now = before = np.empty(0, dtype=labels.dtype)
-        if previous is not None:                 # the tracks of both windows
-            _, i, j = np.intersect1d(tracks, previous[0], return_indices=True)
-            now, before = labels[i], previous[1][j]
         for a in range(len(ids)):                                # bodies, not lines
             for b in range(a + 1, len(ids)):
                 pair = ratios[[a, b], [b, a]]

@@ -951,6 +951,10 @@ class Pipeline:
             if self._count.kept is not None:
                 body, current = self._count.kept
                 keeps = {body: int(self._counted_ids[current])}
+        # a count given is the most: bodies the rotation model cannot tell apart are one body
+        # (the automatic count merges by its own score); the labels of the solve before
+        alike = not counted and res.method == ROTATION_METHOD and res.costs is not None
+        before = self.bodies.previous_labels(obs.win_ids, max_age=0) if alike else None
         mapping = self.bodies.update(obs.win_ids, res.labels, omega, valid, positions=mid,
                                      new=new, keeps=keeps, stamp=obs.stamp)
         if counted:
@@ -964,13 +968,12 @@ class Pipeline:
         c_out[mapping] = cov + focal_covariance(published, focal_log_sigma)
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)
-        labels, carried = self._segment_labels(obs, res.labels, mapping)
-        if not counted and res.method == ROTATION_METHOD and res.costs is not None:
-            # a count given is the most: bodies the rotation model cannot tell apart are one
-            # body, the older id, one twist (the automatic count merges by its own score)
+        stable = relabel(res.labels, mapping)
+        labels, carried = self._segment_labels(obs, stable)
+        if alike:
+            # published under the older id, with one twist
             into = self._alike.add(mapping, cross_ratios(res.costs, res.labels, res.residuals,
-                                                         self._jitter),
-                                   obs.win_ids, relabel(res.labels, mapping))
+                                                         self._jitter), stable, before)
             for young, old in into.items():                  # bodies, not lines
                 v_out[young] = False
                 labels[labels == young] = old
@@ -990,15 +993,15 @@ class Pipeline:
                 'carried': carried, 'focal_length': float(res.focal_length),
                 'focal_log_sigma': focal_log_sigma}
 
-    def _segment_labels(self, obs: Observation, labels: np.ndarray, mapping: np.ndarray
+    def _segment_labels(self, obs: Observation, stable: np.ndarray
                         ) -> Tuple[np.ndarray, np.ndarray]:
         """
         Stable body id of every segment of the frame, and where it was carried over.
 
-        A segment whose track the solve left unassigned keeps the id it was last assigned for
-        up to ``label_memory`` frames.
+        ``stable (N,)``: the stable body id of each track of the window as solved. A segment
+        whose track the solve left unassigned keeps the id it was last assigned for up to
+        ``label_memory`` frames.
         """
-        stable = relabel(labels, mapping)
         out = lookup(obs.track_ids, obs.win_ids, stable.astype(np.int32), -1).astype(np.int32)
         carried = np.zeros(len(out), dtype=bool)
         memory = int(self.params['label_memory'])

@@ -37,16 +37,16 @@ def test_cross_ratios_read_each_bodys_tracks_under_the_others_motion():
 
 
 def split(ids, k: int, swapped: bool = True):
-    """Window ``k``'s track ids and stable labels: 8 tracks each of the bodies ``ids``."""
-    tracks = np.arange(8 * len(ids))
+    """Window ``k``'s stable labels of its tracks: 8 tracks each of the bodies ``ids``."""
     labels = np.repeat(np.asarray(ids), 8)
     if swapped and k % 2:                  # an arbitrary split: half the tracks change body
         labels = np.roll(labels, 4)
-    return tracks, labels
+    return labels
 
 
 def add(alike, ids, ratios, k, swapped=True):
-    return alike.add(ids, ratios, *split(ids, k, swapped))
+    """Window ``k`` after window ``k - 1``."""
+    return alike.add(ids, ratios, split(ids, k, swapped), split(ids, k - 1, swapped))
 
 
 def test_alike_bodies_merge_into_the_older_id_after_a_few_windows():
@@ -92,11 +92,13 @@ def test_bodies_that_keep_their_tracks_are_two_however_alike_their_fit():
     for k in range(2 * ALIKE_SOLVES):
         assert add(alike, ids, near, k, swapped=False) == {}
     # a few borderline tracks that change body are not noise deciding between the two
+    before = split(ids, 0, swapped=False)
     for k in range(2 * ALIKE_SOLVES):
-        tracks, labels = split(ids, 0, swapped=False)
+        labels = split(ids, 0, swapped=False)
         if k % 2:
             labels[0] = 1
-        assert alike.add(ids, near, tracks, labels) == {}
+        assert alike.add(ids, near, labels, before) == {}
+        before = labels
     # once half of them change body from window to window, they are alike
     for k in range(ALIKE_MIN_SOLVES + 2):
         merged = add(alike, ids, near, k)
