@@ -30,26 +30,21 @@ body more or one less scores better:
 - **one more** (a body starts moving): tried every :data:`BIRTH_EVERY` solves while enough
   tracks are left unexplained to make a body (labelled -1, or above the score's outlier
   bound: :func:`birth_candidate`), those tracks as the new one; then, every
-  :data:`SEARCH_EVERY` to :data:`MAX_SEARCH_WAIT` solves or when more tracks come loose,
-  those tracks split in two on their own (a cold solve of two bodies on them alone), the
-  larger half as the new one and the rest left for the window's solve; a trial that leaves
-  two bodies explaining each other's tracks is one motion split in two and is refused
-  (:func:`split_pair`). With no track unexplained, as often as those splits once the count
-  has held :data:`HOLD` solves, the worst-fitting body's tracks are split in two on their
-  own, the larger half keeping the body (one body fitted to two motions measures a noise
-  level that explains them all: a count below the truth would stay there).
+  :data:`SEARCH_EVERY` to :data:`MAX_SEARCH_WAIT` solves or when more tracks come loose, with
+  those tracks unlabelled for the solver's search; a trial that leaves two bodies explaining
+  each other's tracks is one motion split in two and is refused (:func:`split_pair`). With
+  no track unexplained, as often as those searches once the count has held :data:`HOLD`
+  solves, the worst-fitting body's tracks are unlabelled for the search to find two there
+  (one body fitted to two motions measures a noise level that explains them all: a count
+  below the truth would stay there).
 
 Both compare the BIC of :func:`~mlofc_ros.solver.model_selection.bic_score` at one noise level,
 the richer model's (so that the poorer cannot hide behind a larger noise; the level the
 method reports, or its costs' own scale where more than :data:`SCORE_UNEXPLAINED` of the
 tracks would be outliers at that level: :func:`score_noise`), a change must
 win by :data:`SCORE_MARGIN`, and for :data:`HOLD` solves after a change the count does not go
-back (no flicker between two counts that score alike). A trial costs a warm solve, a split
-also a cold solve of the few tracks split (a search of the whole window with them
-unlabelled, as before, cost 10-30 warm solves in one frame: bench count's scheduled stream
-with ``'robust'``, its largest frame 6.8-7.8x its median frame, now 2.7-3.3x, the counts
-the same; Hopkins155 streamed, right count 57 / 38% -> 57 / 35% of the frames, 2 / 3
-motions): on the scheduled stream of ``bench count`` the automatic count costs 0.9-1.4x
+back (no flicker between two counts that score alike). A trial costs a warm solve, a search
+10-30 of them: on the scheduled stream of ``bench count`` the automatic count costs 0.9-1.4x
 the CPU of the count given with ``'robust'``, 0.7-2.3x with ``'general'`` (whose trial of one
 more body is a step when the step holds, its new body fitted from the pivot starts, else a
 tracked solve: 0.75-2.9x when every such trial was a tracked solve).
@@ -98,12 +93,10 @@ SCORE_UNEXPLAINED = 0.25
 #: a body whose lines all miss a frame keeps its id; one that left goes that much later.
 IN_VIEW_FRAMES = MAX_MISSES + 1
 
-#: ``solve(n, init_labels, bodies, subset=None)``: a warm solve of the window at ``n`` bodies
-#: from labels in ``0..n-1`` (``-1`` unknown), body ``i`` continuing the current body
-#: ``bodies[i]`` (``-1``: a new one); the automatic count's search when ``n == 0`` (labels and
-#: bodies None); with ``subset (N,)`` bool a cold solve of those tracks alone (labels and
-#: bodies None), its labels for them.
-Solve = Callable[..., SegmentationResult]
+#: ``solve(n, init_labels, bodies)``: a warm solve of the window at ``n`` bodies from labels
+#: in ``0..n-1`` (``-1`` unknown), body ``i`` continuing the current body ``bodies[i]`` (``-1``:
+#: a new one); the automatic count's search when ``n == 0`` (labels and bodies None).
+Solve = Callable[[int, Optional[np.ndarray], Optional[Sequence[int]]], SegmentationResult]
 
 
 def in_view(tracks: np.ndarray) -> np.ndarray:
@@ -290,16 +283,13 @@ class BodyCount:
         self._since_birth = 0
         loose = born == self.n
         # first the loose tracks as the new body (a warm solve); then, less often, the loose
-        # tracks split in two on their own, the larger half the new body and the rest left
-        # for the window's solve to place (two boxes that start together are no one body)
-        proposals: List[Callable[[], Optional[np.ndarray]]] = [lambda: born]
+        # tracks unlabelled so that the solver's search finds the new body among them (two
+        # boxes that start together are no one body)
+        proposals = [born]
         if (self._since_search >= self._search_wait
                 or loose.sum() >= self._loose_at_failure + min_body_lines(dof)):
-            proposals.append(lambda: _halved(solve, born, loose, self.n))
-        for proposal in proposals:
-            labels = proposal()
-            if labels is None:
-                continue
+            proposals.append(np.where(loose, -1, born))
+        for labels in proposals:
             trial = _trial(solve, self.n + 1, labels, current + [-1])
             if self._takes_birth(trial, res, dof):
                 self._born(_newest(trial.labels, loose))
@@ -312,7 +302,7 @@ class BodyCount:
     def _split(self, res: SegmentationResult, dof: np.ndarray, solve: Solve,
                current: List[int]) -> SegmentationResult:
         """
-        Try one body more with the worst-fitting body's tracks split in two on their own.
+        Try one body more with the worst-fitting body's tracks unlabelled (a search there).
 
         The way back from a count below the truth: one body fitted to two motions measures a
         noise level at which no track is unexplained, so no birth is ever proposed (Hopkins155
@@ -331,19 +321,8 @@ class BodyCount:
         own = costs[held, labels[held]] / dof[held]
         fit = [float(np.median(own[labels[held] == b])) if np.any(labels[held] == b)
                else -np.inf for b in range(self.n)]                  # bodies, not lines
-        worst = int(np.argmax(fit))
-        loose = labels == worst
-        # the worst body's tracks split in two on their own (a cold solve of a few tracks),
-        # the larger half keeping the body, then one warm solve of the window from that
-        halves = _trial(solve, 2, None, None, loose)
-        if halves is None:
-            self._search_failed()
-            return res
-        half = np.asarray(halves.labels)
-        keep = int(np.argmax(np.bincount(half[half >= 0], minlength=2)))
-        split = labels.copy()
-        split[loose] = np.where(half == keep, worst, np.where(half >= 0, self.n, -1))
-        trial = _trial(solve, self.n + 1, split, current + [-1])
+        loose = labels == int(np.argmax(fit))
+        trial = _trial(solve, self.n + 1, np.where(loose, -1, labels), current + [-1])
         if not self._takes_birth(trial, res, dof):
             self._search_failed()
             return res
@@ -452,33 +431,13 @@ def _reported_noise(res: SegmentationResult) -> Optional[float]:
     return float(sigma) if np.isfinite(sigma) and sigma > 0 else None
 
 
-def _trial(solve: Solve, n: int, labels: Optional[np.ndarray],
-           bodies: Optional[Sequence[int]], subset: Optional[np.ndarray] = None
+def _trial(solve: Solve, n: int, labels: np.ndarray, bodies: Sequence[int]
            ) -> Optional[SegmentationResult]:
     """Run a trial solve; None when it cannot be solved (a ``ValueError``)."""
     try:
-        return solve(n, labels, bodies) if subset is None else solve(n, None, None, subset)
+        return solve(n, labels, bodies)
     except ValueError:
         return None
-
-
-def _halved(solve: Solve, labels: np.ndarray, tracks: np.ndarray, body: int
-            ) -> Optional[np.ndarray]:
-    """
-    Return ``labels`` with the ``tracks (N,)`` mask split in two on their own; None if not.
-
-    A cold solve of two bodies on those tracks alone (:data:`Solve`'s ``subset``); the larger
-    half takes ``body``, the smaller one and the outliers are left unlabelled (``-1``) for the
-    window's solve to place. None when the tracks are too few for two bodies.
-    """
-    halves = _trial(solve, 2, None, None, tracks)
-    if halves is None:
-        return None
-    half = np.asarray(halves.labels)
-    keep = int(np.argmax(np.bincount(half[half >= 0], minlength=2)))
-    out = np.array(labels, copy=True)
-    out[tracks] = np.where(half == keep, body, -1)
-    return out
 
 
 def _newest(labels: np.ndarray, loose: np.ndarray) -> int:

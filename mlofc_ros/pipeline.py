@@ -796,10 +796,8 @@ class Pipeline:
             return segment_lines(tracks, n, **common,
                                  **self._warm.keywords(method, labels, n, ids))
 
-        def counted(n: int, labels: Optional[np.ndarray], bodies: Optional[Sequence[int]],
-                    subset: Optional[np.ndarray] = None) -> SegmentationResult:
-            if subset is not None:            # a few tracks on their own, cold
-                return segment_lines(tracks[subset], n, **common)
+        def counted(n: int, labels: Optional[np.ndarray],
+                    bodies: Optional[Sequence[int]]) -> SegmentationResult:
             # the count's bodies by index into the current ones: their stable ids
             ids = (None if bodies is None
                    else [int(self._counted_ids[b]) if b >= 0 else -1 for b in bodies])

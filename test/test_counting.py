@@ -120,9 +120,7 @@ def test_a_reported_noise_below_the_costs_scale_does_not_hide_a_body():
     # at 0.2 px every track would be loose, at the costs' own scale only the second body's
     assert np.array_equal(birth_candidate(one, dof), truth)
 
-    def solve(n, labels, bodies, subset=None):
-        if subset is not None:                        # the loose tracks split on their own
-            return _result(truth[subset], np.zeros((2, 3)))
+    def solve(n, labels, bodies):
         return one if n <= 1 else result(truth, 2, 0.2)
     count = BodyCount(birth_every=1)
     count.solve(tracks, None, solve)
@@ -169,9 +167,7 @@ def test_a_birth_that_splits_one_motion_in_two_is_refused():
         count.solve(tracks, None, lambda n, labels, bodies: one)
         # the split scores far better (a smaller residual for one more body) yet is refused
         count.solve(tracks, np.where(labels == 1, -1, 0),
-                    lambda n, labels, bodies, subset=None, t=trial(other):
-                    (_result(np.zeros(int(np.sum(subset)), dtype=int), np.zeros((2, 3)))
-                     if subset is not None else t if n == 2 else one))
+                    lambda n, labels, bodies, t=trial(other): t if n == 2 else one)
         assert count.n == n, other
 
 
@@ -250,14 +246,10 @@ def test_a_count_below_the_truth_comes_back():
     for better, n in ((two, 2), (one, 1)):
         tried: List[int] = []
 
-        def solve(n, labels, bodies, subset=None, better=better):
-            if subset is not None:
-                # the worst-fitting body's tracks split in two on their own
-                assert n == 2 and np.all(subset) and labels is None and bodies is None
-                return _result(truth, np.zeros((2, 3)))
+        def solve(n, labels, bodies, better=better):
             if n == 2:
-                # then the window from that split, the larger half keeping the body
-                assert np.array_equal(labels, truth) and list(bodies) == [0, -1]
+                # the worst-fitting body's tracks unlabelled, for the search
+                assert np.all(labels == -1) and list(bodies) == [0, -1]
                 tried.append(k)
                 return better if better.n_bodies == 2 else two_alike
             return one
@@ -279,7 +271,7 @@ def test_a_count_below_the_truth_comes_back():
 
 
 def test_a_trial_that_cannot_be_solved_is_lost_not_the_frame():
-    def solve(n, labels, bodies, subset=None):
+    def solve(n, labels, bodies):
         if n == 0:
             return _result(np.repeat([0, -1], [80, 20]), [[0, 0, 0]])
         if n > 1:
