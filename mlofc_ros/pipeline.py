@@ -355,7 +355,8 @@ class Pipeline:
         w, c, v = invalid_bodies(self.n_bodies)
         return FrameResult(stamp, np.zeros((0, 4), np.float32), np.zeros(0, np.uint32),
                            np.zeros(0, np.int32), np.zeros(0, np.float32), w, c, v,
-                           dict.fromkeys(TIMING_KEYS, 0.0), fill, problem, skipped=skipped)
+                           dict.fromkeys(TIMING_KEYS, 0.0), fill, problem, skipped=skipped,
+                           body_solved=v.copy())
 
     def process(self, gray: np.ndarray, stamp_seconds: float,
                 camera: CameraLike = None) -> FrameResult:

@@ -237,6 +237,7 @@ def test_stamp_going_back_restarts_once_and_duplicates_are_skipped():
     dup = p.process(seq.frames[4], seq.stamps[3], cam)            # duplicate stamp
     assert dup.skipped and 'duplicate' in dup.problem
     assert len(dup.segments) == 0 and not dup.body_valid.any()
+    assert dup.body_solved.shape == dup.body_valid.shape and not dup.solved
     assert p.window_fill == 3
     back = p.process(seq.frames[4], seq.stamps[1], cam)           # bag loop
     assert not back.skipped and 'back' in back.problem
