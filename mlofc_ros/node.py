@@ -473,6 +473,8 @@ class MlofcNode(Node):
             method = self._method if wanted else self._remote_method
             self._remote.reconfigure(**dict(changes, method=method))
             self._remote_method = method
+            if wanted and changes.get('method', AUTO) != AUTO:
+                self._drop_votes(self._remote)
         if self._standby is not None and changes:
             try:
                 self._standby.reconfigure(**dict(changes, method=TRANSLATION_METHOD))
@@ -518,6 +520,19 @@ class MlofcNode(Node):
         self._remote, self._remote_method = remote, self._method
         self._remote_ended = 0
         self.get_logger().info(f'solving in a child process (pid {remote.pid})')
+
+    def _drop_votes(self, remote: SolveProcess) -> None:
+        """
+        Have a child that solves for a method set by hand publish its own labels.
+
+        After the switch of ``method:=auto`` the child goes on with auto's label votes
+        (:meth:`Pipeline.take_over`); set to a method by hand, it stops them (its warm
+        starts restart, as after any change of method).
+        """
+        try:
+            remote.take_over(remote.hand_over()._replace(votes=None))
+        except SolverProcessError as exc:
+            self.get_logger().warning(f'the solver process kept its state ({exc})')
 
     def _take_solve_side(self, remote: SolveProcess) -> None:
         """Take the solve side's state back from a child before solving here."""

@@ -109,7 +109,8 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
     ParamSpec('method', str, 'auto',
               'Solver method: auto = robust (rotation about the camera, fast) until its '
               'rotation model misfits the scene (bodies translate relative to the camera), '
-              'then general for good (mlofc_ros.method_choice); or one of '
+              'then general for good (mlofc_ros.method_choice), its labels voted over the '
+              "solves, the rotation model's too (mlofc_ros.label_votes); or one of "
               'mlofc_ros.solver.METHODS.'),
     ParamSpec('min_segment_length', float, 20.0,
               'Shortest line segment detected and tracked, in pixels.',

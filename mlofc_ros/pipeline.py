@@ -43,6 +43,7 @@ from mlofc_ros.counting import BodyCount, compact_labels
 from mlofc_ros.frame import (centred_intrinsics, check_image_size, check_lines, FrameResult,
                              invalid_bodies, lookup, Observation, ray_intrinsics, segment_rays,
                              TIMING_KEYS, unsolved_fields)
+from mlofc_ros.label_votes import LabelVotes, match_bodies, ROTATION_GATE, ROTATION_WEIGHT
 from mlofc_ros.lane import Finished, SolveJob
 from mlofc_ros.method_choice import (AUTO, MethodChoice, MIN_JITTER_FRAMES, misfit_bodies,
                                      ROTATION_METHOD, track_jitter, TRANSLATION_METHOD)
@@ -96,7 +97,10 @@ class SolveSide(NamedTuple):
     the automatic count and the stable id of each of its bodies; ``focal``: the focal
     estimate of an uncalibrated stream (its window samples, the estimate, the stamp of its
     last evidence, and what it gives the observations: ``(f px, std of ln f)`` or None);
-    ``running``: the last answer, carried until the next one.
+    ``running``: the last answer, carried until the next one; ``votes``: ``method='auto'``'s
+    label votes (:mod:`.label_votes`), None for another method: a pipeline that solves with
+    the general model for an ``'auto'`` stream (the node's solver process after the switch)
+    goes on with them.
     """
 
     bodies: BodyTracker
@@ -104,6 +108,7 @@ class SolveSide(NamedTuple):
     counted_ids: Optional[np.ndarray]
     focal: Tuple[List[float], Optional[FocalEstimate], float, Optional[Tuple[float, float]]]
     running: Optional[RunningFit]
+    votes: Optional[LabelVotes]
 
 
 def make_tracker(params: Mapping[str, Any]) -> LineTracker:
@@ -195,6 +200,14 @@ class Pipeline:
         # of the last rotation-model solve (px), which both read
         self._alike = AlikeBodies()
         self._jitter = math.nan
+        # method='auto': the labels it publishes, voted over the solves (None: another
+        # method's own labels); once it solves with the general model, the rotation model's
+        # solve of the same frame votes too: that solve's labels and which tracks it fits (set
+        # by _segment, taken by _publish), and its labels by track id, its next warm start
+        self._votes: Optional[LabelVotes] = (LabelVotes() if self.params['method'] == AUTO
+                                             else None)
+        self._rotation_side: Optional[Tuple[np.ndarray, np.ndarray]] = None
+        self._rotation_prev: Optional[Tuple[np.ndarray, np.ndarray]] = None
 
     # --- configuration -------------------------------------------------------------------
 
@@ -234,6 +247,8 @@ class Pipeline:
             self._running = None
         if 'method' in changed or new.get('method') == AUTO:
             self._choice.reset()            # 'auto' set (again) starts from the rotation model
+            self._votes = LabelVotes() if self.params['method'] == AUTO else None
+            self._forget_votes()
 
     def reset(self) -> None:
         """
@@ -262,6 +277,12 @@ class Pipeline:
         self._alike.reset()
         self._count.reset()
         self._counted_ids = None
+        self._forget_votes()
+
+    def _forget_votes(self) -> None:
+        if self._votes is not None:
+            self._votes.reset()
+        self._rotation_side = self._rotation_prev = None
 
     def _forget_focal(self) -> None:
         self._focal_samples.clear()
@@ -717,7 +738,7 @@ class Pipeline:
         """
         return SolveSide(self.bodies, self._count, self._counted_ids,
                          (list(self._focal_samples), self._focal, self._focal_evidence_stamp,
-                          self._focal_now), self._running)
+                          self._focal_now), self._running, self._votes)
 
     def take_over(self, side: SolveSide) -> None:
         """
@@ -729,7 +750,13 @@ class Pipeline:
         self._generation += 1
         self._warm.reset()
         self._alike.reset()
+        self._rotation_side = self._rotation_prev = None
         self.bodies, self._count, self._counted_ids = side.bodies, side.count, side.counted_ids
+        if self.params['method'] == AUTO:
+            self._votes = side.votes if side.votes is not None else LabelVotes()
+        else:
+            # 'auto' whose solving moved here (the general model's process) goes on voting
+            self._votes = side.votes if self.params['method'] == TRANSLATION_METHOD else None
         samples, self._focal, self._focal_evidence_stamp, self._focal_now = side.focal
         self._focal_samples = list(samples)
         self._running = side.running
@@ -762,6 +789,7 @@ class Pipeline:
         """Reset the solve side as an observation asks (see :attr:`Observation.resets`)."""
         if 'tracks' in resets:
             self.bodies.forget_tracks()     # the tracker restarted and may reuse track ids
+            self._forget_votes()
             self._generation += 1
         if 'bodies' in resets:
             self._reset_bodies()
@@ -774,8 +802,10 @@ class Pipeline:
 
         The ``method`` parameter's method, or its stand-in while the window holds too few
         frames, warm-started from the previous solves; with ``num_bodies=0`` at the count
-        kept online (:class:`~mlofc_ros.counting.BodyCount`).
+        kept online (:class:`~mlofc_ros.counting.BodyCount`). With ``method='auto'`` solving
+        with the general model, the rotation model solves the frame too (:meth:`_rotation_vote`).
         """
+        self._rotation_side = None
         if obs.window_fill < 2 or obs.blank:           # a blank frame observes no motion
             return None
         if not len(obs.win_ids):
@@ -831,8 +861,45 @@ class Pipeline:
             self._jitter = track_jitter(tracks)
         if (auto and method.name == self._choice.method
                 and tracks.shape[1] >= min(method.window, self._window.size)):
-            self._choice.add(res.residuals, self._jitter)
+            if self._choice.add(res.residuals, self._jitter):
+                # the votes so far are the rotation model's labels of a scene it misfits
+                self._forget_votes()
+        if self._votes is not None and res.method == TRANSLATION_METHOD:
+            self._rotation_side = self._rotation_vote(obs, res.n_bodies, common)
         return res
+
+    def _rotation_vote(self, obs: Observation, n: int, common: Dict[str, Any]
+                       ) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+        """
+        Solve the window of ``obs`` with the rotation model too, for ``'auto'``'s label votes.
+
+        Its own frames (the last 5 when ``window`` is 0), ``n`` bodies, warm-started from its
+        own previous labels. Returns its labels ``(N,)`` (solver bodies, ``-1`` none) and which
+        tracks it fits within :data:`.label_votes.ROTATION_GATE` times their jitter; None when
+        it cannot tell (too few frames or tracks for the jitter) or fails: the general model's
+        labels then vote alone.
+        """
+        rotation = get_method(ROTATION_METHOD)
+        tracks = obs.win_tracks
+        if int(self.params['window']) == 0:
+            tracks = tracks[:, -rotation.window:]
+        jitter = track_jitter(tracks) if tracks.shape[1] >= MIN_JITTER_FRAMES else math.nan
+        if not (jitter > 0):
+            return None
+        init = None
+        if self._rotation_prev is not None:
+            init = lookup(obs.win_ids, *self._rotation_prev, -1)
+            init = np.where(init < n, init, -1)
+        try:
+            res = segment_lines(tracks, n, **dict(common, method=rotation.name),
+                                **dict(rotation.fixed, init_labels=init))
+        except Exception:  # noqa: B902 (a vote the frame can do without)
+            return None
+        labels = np.asarray(res.labels, dtype=np.int64)
+        self._rotation_prev = (np.asarray(obs.win_ids), labels)
+        with np.errstate(invalid='ignore'):
+            fits = np.asarray(res.residuals, dtype=float) <= ROTATION_GATE * jitter
+        return labels, fits
 
     def _step_beside_lane(self, obs: Observation, method: Method, n: int, lane: Any,
                           common: Dict[str, Any], problems: List[str]
@@ -970,6 +1037,8 @@ class Pipeline:
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)
         stable = relabel(res.labels, mapping)
+        if self._votes is not None:
+            stable = self._voted(obs, stable)
         labels, carried = self._segment_labels(obs, stable)
         if alike:
             # published under the older id, with one twist
@@ -993,6 +1062,24 @@ class Pipeline:
                 'body_solved': solved,
                 'carried': carried, 'focal_length': float(res.focal_length),
                 'focal_log_sigma': focal_log_sigma}
+
+    def _voted(self, obs: Observation, stable: np.ndarray) -> np.ndarray:
+        """
+        Return the voted stable id of every track of the window (:mod:`.label_votes`).
+
+        ``stable (N,)``: this solve's; the rotation model's solve of the frame, if any, votes
+        too, its bodies under the stable ids they share most tracks with.
+        """
+        votes = self._votes
+        assert votes is not None
+        side, self._rotation_side = self._rotation_side, None
+        votes.new_solve(obs.win_ids)
+        votes.add(obs.win_ids, stable)
+        if side is not None:
+            labels, fits = side
+            ids = match_bodies(labels, stable, int(labels.max(initial=-1)) + 1)
+            votes.add(obs.win_ids, relabel(labels, ids), ROTATION_WEIGHT, where=fits)
+        return votes.labels(obs.win_ids)
 
     def _segment_labels(self, obs: Observation, stable: np.ndarray
                         ) -> Tuple[np.ndarray, np.ndarray]:
