@@ -639,6 +639,13 @@ def test_method_auto_moves_to_the_general_model_in_a_child_once_bodies_translate
     same = [before[t] == lab for t, lab in zip(last[1].tolist(), last[2].tolist())
             if before.get(t, -1) >= 0 and lab >= 0]
     assert len(same) > 10 and np.mean(same) > 0.5, same
+    # the child goes on with auto's label votes; set by hand to 'general', it solves on with
+    # its own labels (the node is idle between frames: the test may ask the child)
+    remote = h.mlofc._remote
+    assert remote.hand_over().votes is not None
+    assert h.set_params(method='general')[0].successful
+    h.frame(image_msg(seq.frames[0], seq.stamps[-1] + 0.5))
+    assert h.mlofc._remote is remote and remote.hand_over().votes is None
     # set again, 'auto' starts from the rotation model, solved here; the general model's
     # child waits again
     assert h.set_params(method='auto')[0].successful
