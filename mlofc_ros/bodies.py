@@ -88,6 +88,15 @@ def assign(score: np.ndarray) -> np.ndarray:
     return out[:r]
 
 
+def find_ids(table: np.ndarray, ids: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Positions ``(N,)`` of ``ids (N,)`` in the sorted int64 ``table``, and which are there."""
+    if not table.size or not ids.size:
+        return np.zeros(ids.shape, dtype=np.intp), np.zeros(ids.shape, dtype=bool)
+    # (searchsorted is >= 0: np.minimum, not the much slower np.clip)
+    pos = np.minimum(np.searchsorted(table, ids), table.size - 1)
+    return pos, table[pos] == ids
+
+
 def relabel(labels: np.ndarray, mapping: np.ndarray) -> np.ndarray:
     """Map solver labels (``-1`` unassigned) through ``mapping`` (solver body -> stable id)."""
     labels = np.asarray(labels, dtype=np.int64)
@@ -135,12 +144,7 @@ class BodyTracker:
 
     def _find(self, track_ids: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Positions of ``track_ids`` in the memory and whether each is there."""
-        ids = np.asarray(track_ids, dtype=np.int64).ravel()
-        if not self._track_ids.size or not ids.size:
-            return np.zeros(ids.shape, dtype=np.intp), np.zeros(ids.shape, dtype=bool)
-        # (searchsorted is >= 0: np.minimum, not the much slower np.clip)
-        pos = np.minimum(np.searchsorted(self._track_ids, ids), self._track_ids.size - 1)
-        return pos, self._track_ids[pos] == ids
+        return find_ids(self._track_ids, np.asarray(track_ids, dtype=np.int64).ravel())
 
     def previous_labels(self, track_ids: np.ndarray,
                         max_age: Optional[int] = None) -> np.ndarray:

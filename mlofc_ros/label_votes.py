@@ -35,6 +35,7 @@ and 3.1 / 7.4. Through the pipeline and on rendered scenes: docs/design/general.
 """
 from typing import Optional
 
+from mlofc_ros.bodies import assign, find_ids
 import numpy as np
 
 #: Each solve keeps this share of the votes before it (a memory of about five solves).
@@ -56,8 +57,8 @@ def match_bodies(labels: np.ndarray, onto: np.ndarray, n: int) -> np.ndarray:
     Return the id in ``onto`` that each of ``n`` bodies in ``labels`` shares most tracks with.
 
     ``labels (N,)``: bodies ``0..n-1`` (``-1`` none); ``onto (N,)``: ids ``>= 0`` of the same
-    tracks (``-1`` none). Greedy, largest overlap first, one body per id; ``(n,)`` int64,
-    ``-1`` for a body left without one.
+    tracks (``-1`` none). One body per id, the most shared tracks in all
+    (:func:`.bodies.assign`); ``(n,)`` int64, ``-1`` for a body that shares none with its id.
     """
     lab = np.asarray(labels, dtype=np.int64)
     to = np.asarray(onto, dtype=np.int64)
@@ -67,13 +68,10 @@ def match_bodies(labels: np.ndarray, onto: np.ndarray, n: int) -> np.ndarray:
         return out
     overlap = np.zeros((n, int(to[both].max()) + 1))
     np.add.at(overlap, (lab[both], to[both]), 1.0)
-    for _ in range(n):                                       # bodies, not lines
-        body, target = np.unravel_index(np.argmax(overlap), overlap.shape)
-        if overlap[body, target] <= 0:
-            break
-        out[body] = target
-        overlap[body, :] = 0.0
-        overlap[:, target] = 0.0
+    cols = assign(overlap)
+    shared = cols < overlap.shape[1]
+    shared[shared] = overlap[np.flatnonzero(shared), cols[shared]] > 0
+    out[shared] = cols[shared]
     return out
 
 
@@ -99,10 +97,8 @@ class LabelVotes:
         order = np.argsort(ids, kind='stable')
         ids = ids[order]
         votes = np.zeros((ids.size, self._votes.shape[1]))
-        if self._ids.size and ids.size:
-            pos = np.minimum(np.searchsorted(self._ids, ids), self._ids.size - 1)
-            hit = self._ids[pos] == ids
-            votes[hit] = DECAY * self._votes[pos[hit]]
+        pos, hit = find_ids(self._ids, ids)
+        votes[hit] = DECAY * self._votes[pos[hit]]
         self._ids, self._votes = ids, votes
         self._now = np.zeros_like(votes)
 
@@ -119,10 +115,10 @@ class LabelVotes:
         ok = lab >= 0
         if where is not None:
             ok &= np.asarray(where, dtype=bool).ravel()
-        if not self._ids.size or not np.any(ok):
+        pos, hit = find_ids(self._ids, ids)
+        ok &= hit
+        if not np.any(ok):
             return
-        pos = np.minimum(np.searchsorted(self._ids, ids), self._ids.size - 1)
-        ok &= self._ids[pos] == ids
         width = int(lab[ok].max(initial=-1)) + 1
         if width > self._votes.shape[1]:
             grow = ((0, 0), (0, width - self._votes.shape[1]))
@@ -140,10 +136,9 @@ class LabelVotes:
         """
         ids = np.asarray(track_ids, dtype=np.int64).ravel()
         out = np.full(ids.shape, -1, dtype=np.int64)
-        if not self._ids.size or not self._votes.shape[1] or not ids.size:
+        if not self._votes.shape[1]:
             return out
-        pos = np.minimum(np.searchsorted(self._ids, ids), self._ids.size - 1)
-        hit = self._ids[pos] == ids
+        pos, hit = find_ids(self._ids, ids)
         votes = self._votes[pos[hit]]
         best = np.argmax(votes + _TIE * self._now[pos[hit]], axis=1)
         out[hit] = np.where(self._now[pos[hit]].max(axis=1) > 0, best, -1)
