@@ -671,6 +671,10 @@ class MlofcNode(Node):
                     self.get_logger().error(
                         f'the solver process ended {self._remote_ended} times in a row '
                         f'({exc}): solving in the node process from now on')
+                else:
+                    # the restarted child takes the solve side as a new one does (the next
+                    # observation restarts its body ids): an 'auto' stream's votes go on
+                    remote.take_over(self._pipeline.hand_over())
                 raise
             self._remote_ended = 0
         self._last_solve_s = time.monotonic() - t

@@ -643,6 +643,14 @@ def test_method_auto_moves_to_the_general_model_in_a_child_once_bodies_translate
     # its own labels (the node is idle between frames: the test may ask the child)
     remote = h.mlofc._remote
     assert remote.hand_over().votes is not None
+    # a child that ends is restarted and votes on (its body ids restart)
+    os.kill(remote.pid, 9)
+    n = h.mlofc.stats['errors']
+    h.deliver(image_msg(seq.frames[0], seq.stamps[-1] + 0.2))
+    assert h.wait(lambda: h.mlofc.stats['errors'] > n and h.mlofc.pending_frames() == 0)
+    h.frame(image_msg(seq.frames[1], seq.stamps[-1] + 0.25))
+    assert h.mlofc._remote is remote and remote.alive
+    assert remote.hand_over().votes is not None
     assert h.set_params(method='general')[0].successful
     h.frame(image_msg(seq.frames[0], seq.stamps[-1] + 0.5))
     assert h.mlofc._remote is remote and remote.hand_over().votes is None
