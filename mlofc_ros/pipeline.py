@@ -877,10 +877,11 @@ class Pipeline:
         own previous labels, with no search once it has them (``warm_inliers`` 0: the model
         misfits the scene, so its warm start seldom kept the usual share of inliers and it
         searched in 110 of 143 frames of an own3+bg run, 10 ms each; its votes count only
-        where it fits a track anyway; Hopkins155 streamed, 3 motions, 8.5 -> 8.4%). Returns its labels ``(N,)`` (solver bodies, ``-1`` none) and which
-        tracks it fits within :data:`.label_votes.ROTATION_GATE` times their jitter; None when
-        it cannot tell (too few frames or tracks for the jitter) or fails: the general model's
-        labels then vote alone.
+        where it fits a track anyway; Hopkins155 streamed, 3 motions, 8.5 -> 8.4%). Returns
+        its labels ``(N,)`` (solver bodies, ``-1`` none) and which tracks it fits within
+        :data:`.label_votes.ROTATION_GATE` times their jitter; None when it cannot tell (too
+        few frames or tracks for the jitter) or fails: the general model's labels then vote
+        alone.
         """
         rotation = get_method(ROTATION_METHOD)
         tracks = obs.win_tracks
