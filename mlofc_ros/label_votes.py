@@ -139,7 +139,7 @@ class LabelVotes:
         if not self._votes.shape[1]:
             return out
         pos, hit = find_ids(self._ids, ids)
-        votes = self._votes[pos[hit]]
-        best = np.argmax(votes + _TIE * self._now[pos[hit]], axis=1)
-        out[hit] = np.where(self._now[pos[hit]].max(axis=1) > 0, best, -1)
+        now = self._now[pos[hit]]
+        best = np.argmax(self._votes[pos[hit]] + _TIE * now, axis=1)
+        out[hit] = np.where(now.max(axis=1) > 0, best, -1)
         return out
