@@ -53,7 +53,7 @@ from typing import Callable, List, Optional, Sequence, Tuple
 
 from mlofc_ros.solver import SegmentationResult
 from mlofc_ros.solver.model_selection import (bic_score, explained, MAX_BODIES, min_body_lines,
-                                              track_dof, unexplained)
+                                              track_dof, track_neighbours, unexplained)
 from mlofc_ros.solver.robust import noise_sigma
 from mlofc_ros.tracks.tracker import MAX_MISSES
 import numpy as np
@@ -244,6 +244,7 @@ class BodyCount:
             self.n, self._since_birth, self.last_change = res.n_bodies, 0, 'search'
             return res
         dof = track_dof(tracks)
+        near = track_neighbours(tracks)    # the score's label term reads them
         current = list(range(self.n))
         res = solve(self.n, np.asarray(previous), current)
         sigma = score_noise(res, dof)
@@ -264,8 +265,7 @@ class BodyCount:
             # view keeps tracks in the window's older frames that only its motion explains
             scored = dof if keep >= 0 else np.where(visible, dof, 0.0)
             trial = _trial(solve, self.n - 1, labels, [b for b in current if b != gone])
-            if (trial is not None and bic_score(trial, sigma, scored)
-                    < bic_score(res, sigma, scored) - SCORE_MARGIN):
+            if trial is not None and scores_better(trial, res, sigma, scored, near):
                 self.n, self.last_change = self.n - 1, 'merge'
                 self._last, self._since_change = 'merge', 0
                 if keep >= 0:
@@ -278,7 +278,7 @@ class BodyCount:
         if born is None:
             if (self._since_search >= self._search_wait and settled
                     and self.n < MAX_BODIES):
-                return self._split(res, dof, solve, current)
+                return self._split(res, dof, solve, current, near)
             return res
         self._since_birth = 0
         loose = born == self.n
@@ -291,7 +291,7 @@ class BodyCount:
             proposals.append(np.where(loose, -1, born))
         for labels in proposals:
             trial = _trial(solve, self.n + 1, labels, current + [-1])
-            if self._takes_birth(trial, res, dof):
+            if self._takes_birth(trial, res, dof, near):
                 self._born(_newest(trial.labels, loose))
                 return trial
         if len(proposals) > 1:
@@ -300,7 +300,7 @@ class BodyCount:
         return res
 
     def _split(self, res: SegmentationResult, dof: np.ndarray, solve: Solve,
-               current: List[int]) -> SegmentationResult:
+               current: List[int], near: np.ndarray) -> SegmentationResult:
         """
         Try one body more with the worst-fitting body's tracks unlabelled (a search there).
 
@@ -323,7 +323,7 @@ class BodyCount:
                else -np.inf for b in range(self.n)]                  # bodies, not lines
         loose = labels == int(np.argmax(fit))
         trial = _trial(solve, self.n + 1, np.where(loose, -1, labels), current + [-1])
-        if not self._takes_birth(trial, res, dof):
+        if not self._takes_birth(trial, res, dof, near):
             self._search_failed()
             return res
         # the two bodies holding most of the split body's tracks: the smaller one is new
@@ -334,15 +334,19 @@ class BodyCount:
         return trial
 
     def _takes_birth(self, trial: Optional[SegmentationResult], res: SegmentationResult,
-                     dof: np.ndarray) -> bool:
-        """Return whether a trial of one body more replaces ``res`` (the count's rules)."""
+                     dof: np.ndarray, near: np.ndarray) -> bool:
+        """
+        Return whether a trial of one body more replaces ``res`` (the count's rules).
+
+        ``near (N, k)``: the tracks' image neighbours (the score's label term).
+        """
         if trial is None or trial.n_bodies != self.n + 1:
             return False
         counts = np.bincount(trial.labels[trial.labels >= 0], minlength=trial.n_bodies)
         richer = score_noise(trial, dof)
         return bool(np.all(counts >= min_body_lines(dof))
-                    and bic_score(trial, richer, dof) < bic_score(res, richer, dof)
-                    - SCORE_MARGIN and split_pair(trial, richer, dof) is None)
+                    and scores_better(trial, res, richer, dof, near)
+                    and split_pair(trial, richer, dof) is None)
 
     def _born(self, new_body: int) -> None:
         """Take one body more, ``new_body`` of the trial being the new one."""
@@ -356,6 +360,21 @@ class BodyCount:
         """Wait twice as long for the next search (up to :data:`MAX_SEARCH_WAIT`)."""
         self._since_search = 0
         self._search_wait = min(2 * self._search_wait, MAX_SEARCH_WAIT)
+
+
+def scores_better(trial: SegmentationResult, res: SegmentationResult, sigma: Optional[float],
+                  dof: np.ndarray, near: np.ndarray) -> bool:
+    """
+    Return whether ``trial`` (another count) scores better than ``res`` by :data:`SCORE_MARGIN`.
+
+    The BIC of both at noise ``sigma`` (px) over the tracks with ``dof > 0``, under both
+    label priors (:func:`~mlofc_ros.solver.model_selection.label_cost`): the uniform one and
+    the tracks' image neighbours ``near (N, k)``. A body more must win under the uniform
+    prior, which charges its labels most; a body less under the neighbours', which charges
+    compact bodies least: the count changes only where both agree.
+    """
+    return all(bic_score(trial, sigma, dof, nb) < bic_score(res, sigma, dof, nb) - SCORE_MARGIN
+               for nb in (None, near))
 
 
 def split_pair(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray

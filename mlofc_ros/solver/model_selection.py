@@ -19,24 +19,35 @@ capped at the outlier bound, all at ONE noise level (the one estimated with the 
 so that an under-fitted model cannot hide behind an inflated noise estimate). The score adds
 ``log(rows)`` per parameter of a body's motion (three for a rotation, six with a translation)
 and ``2 log n`` per track (its label), and the smallest score wins: a further body must
-explain more than it costs to describe.
+explain more than it costs to describe. The online count (:mod:`mlofc_ros.counting`) also
+scores its changes under a label prior that knows bodies are compact in the image
+(:func:`label_cost` with the tracks' neighbours).
 """
 from dataclasses import replace
 from typing import Optional, Tuple
 
 import numpy as np
 
+from .lines import first_midpoints
 from .methods import Method, REGISTRY
 from .models import chi2_quantile
 from .problem import Problem
 from .result import SegmentationResult
 from .robust import noise_sigma, OUTLIER_P
+from .spatial import spatial_neighbours
 
 #: Largest number of bodies considered by default.
 MAX_BODIES = 5
 #: A body counts only with at least this many lines, and this fraction of the usable lines.
 MIN_BODY_LINES = 4
 MIN_BODY_FRACTION = 0.04
+#: Pseudo-count per body of a track's label among its neighbours' (:func:`label_cost`:
+#: Laplace's rule). Hopkins155 line tracks, three windows of 5 frames per sequence, the true
+#: segmentation against one body less and one more, compared as the online count compares
+#: them (bench count's score alone): the true count holds in 82 / 64% of the 2 / 3-motion
+#: windows with 1, 79 / 62% with 4 ('general'; 71 / 52% with the uniform prior alone),
+#: 'robust' 75 / 62%, 73 / 53% (65 / 45%).
+LABEL_PRIOR = 1.0
 
 
 def track_dof(tracks: np.ndarray) -> np.ndarray:
@@ -104,18 +115,55 @@ def unexplained(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray
     return (dof > 0) & ~explained(res, sigma, dof).any(axis=1)
 
 
-def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) -> float:
-    """
-    BIC of a segmentation: ``R log(RSS / R) + k n log R + 2 N log n``.
+def track_neighbours(tracks: np.ndarray) -> np.ndarray:
+    """Return the image neighbours ``(N, k)`` of tracks ``(N, K, 4)`` (:func:`label_cost`)."""
+    return spatial_neighbours(first_midpoints(np.asarray(tracks)))
 
-    ``2 N log n`` is minus twice the log-likelihood of the labels under a uniform prior: with
-    two frames a line has only two equations, and the freedom to pick the best of n bodies
-    alone lowers the residual of pure noise by a factor of about n.
+
+def label_cost(labels: np.ndarray, n: int, usable: np.ndarray,
+               neighbours: Optional[np.ndarray] = None) -> float:
+    """
+    Return minus twice the log-likelihood of the usable tracks' labels (the score's label term).
+
+    ``labels (N,)`` in ``0..n-1`` (``-1`` none), ``usable (N,)`` bool. Without ``neighbours``
+    a uniform prior, ``2 log n`` per track. With ``neighbours (N, k)`` (image neighbours,
+    ``-1`` none: :func:`track_neighbours`) each track's label is predicted by those of its
+    labelled neighbours, ``(a + same) / (a n + labelled)`` with :data:`LABEL_PRIOR` ``a``:
+    real bodies are compact in the image, so a segmentation into compact regions costs
+    little more than one body (under the uniform prior one body less won in 38% of the
+    3-motion windows of Hopkins155 given the true segmentation), while labels mixed among
+    their neighbours (the paper's intermixed random lines) cost about ``2 log n`` each, as
+    under the uniform prior. An unlabelled track costs ``2 log n``.
+    """
+    labels = np.asarray(labels)
+    usable = np.asarray(usable, dtype=bool)
+    if n <= 1 or not usable.any():
+        return 0.0
+    if neighbours is None or np.asarray(neighbours).shape[1] == 0:
+        return 2.0 * float(np.count_nonzero(usable)) * float(np.log(n))
+    nb = np.asarray(neighbours)
+    theirs = np.where(nb >= 0, labels[nb], -1)
+    labelled = np.count_nonzero(theirs >= 0, axis=1)
+    same = np.count_nonzero((theirs == labels[:, None]) & (theirs >= 0), axis=1)
+    share = np.where(labels >= 0, (LABEL_PRIOR + same) / (LABEL_PRIOR * n + labelled), 1.0 / n)
+    return float(-2.0 * np.sum(np.log(share[usable])))
+
+
+def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray,
+              neighbours: Optional[np.ndarray] = None) -> float:
+    """
+    BIC of a segmentation: ``R log(RSS / R) + k n log R + L``.
+
+    ``L`` is minus twice the log-likelihood of the labels (:func:`label_cost`; ``2 N log n``
+    without ``neighbours``): with two frames a line has only two equations, and the freedom
+    to pick the best of n bodies alone lowers the residual of pure noise by a factor of
+    about n.
 
     ``RSS`` sums every track's cost capped at the outlier bound (at noise ``sigma``, or the
     model's own robust noise estimate when None); ``R`` rows, ``N`` usable tracks; ``k`` the
     parameters of a body's motion (:attr:`.Method.motion_parameters` of ``res.method``: 3,
-    6 for ``'general'``, whose bodies also translate).
+    6 for ``'general'``, whose bodies also translate); ``neighbours (N, k)``: the tracks'
+    image neighbours (:func:`track_neighbours`), None for the uniform label prior.
     """
     n = res.n_bodies
     k = REGISTRY[res.method].motion_parameters if res.method in REGISTRY else 3
@@ -126,7 +174,7 @@ def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray) 
     rss = float(np.sum(np.minimum(best, cap)))
     rows = float(np.sum(dof))
     return (rows * np.log(max(rss, 1e-300) / rows) + k * n * np.log(max(rows, 2.0))
-            + 2.0 * usable.sum() * np.log(n))
+            + label_cost(res.labels, n, usable, neighbours))
 
 
 def select_bodies(tracks: np.ndarray, intrinsics: Optional[Tuple[float, float, float, float]],

@@ -20,7 +20,8 @@ per real sequence to ``docs/results/count/``.
 Every stream goes through ``mlofc_ros.pipeline.Pipeline`` frame by frame (stamps at 30
 frames/s) with ``num_bodies=0`` (:mod:`mlofc_ros.counting`) and again with the count given,
 per solver method (``--methods``; each in its own window, :attr:`.Method.window`: 5 for
-``robust``, 10 for ``general``):
+``robust``, 10 for ``general`` and ``auto``, which solves with the rotation model on the last
+5 until the scene translates):
 
 - **scheduled** (:func:`mlofc_tools.synthetic.scheduled_scene`, seeds 0-5): line tracks of a
   still background (120 lines) and three boxes of 40 lines rotating about the camera centre
@@ -66,10 +67,10 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import zlib
 
 import cv2
-from mlofc_ros.counting import SCORE_MARGIN, score_noise
-from mlofc_ros.pipeline import FrameResult, Pipeline
-from mlofc_ros.solver import get_method, segment_lines
-from mlofc_ros.solver.model_selection import bic_score, min_body_lines, track_dof
+from mlofc_ros.counting import score_noise, scores_better
+from mlofc_ros.pipeline import FrameResult, Pipeline, window_frames
+from mlofc_ros.solver import segment_lines
+from mlofc_ros.solver.model_selection import min_body_lines, track_dof, track_neighbours
 from mlofc_tools.bench import common
 from mlofc_tools.bench.hopkins_runs import LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX
 from mlofc_tools.bench.pipeline import read_real_sequence, REAL_DIR
@@ -200,7 +201,8 @@ def score_preference(tracks: np.ndarray, truth: np.ndarray, n: int,
     from the true labels, one body less and one more from scratch, and compared as
     :class:`~mlofc_ros.counting.BodyCount` compares a trial with the current count: the BIC at
     the richer model's noise level (:func:`~mlofc_ros.counting.score_noise`), a change must
-    win by ``SCORE_MARGIN``, a new body needs ``min_body_lines`` tracks. Per window
+    win by ``SCORE_MARGIN`` under both label priors (:func:`~mlofc_ros.counting.scores_better`),
+    a new body needs ``min_body_lines`` tracks. Per window
     ``(fewer, more)``: one body less, one more would be taken. Neither: the score, given the
     true segmentation, keeps the true count.
     """
@@ -212,6 +214,7 @@ def score_preference(tracks: np.ndarray, truth: np.ndarray, n: int,
         seen = np.all(np.isfinite(win[..., 0]), axis=1)
         win, labels = win[seen], np.unique(truth[seen], return_inverse=True)[1]
         dof = track_dof(win)
+        nb = track_neighbours(win)
         try:
             true = segment_lines(win, n, init_labels=labels, **kw)
             fewer = segment_lines(win, n - 1, **kw)
@@ -224,11 +227,11 @@ def score_preference(tracks: np.ndarray, truth: np.ndarray, n: int,
         except ValueError:
             more_ok = False
         sigma = score_noise(true, dof)
-        took_fewer = bic_score(fewer, sigma, dof) < bic_score(true, sigma, dof) - SCORE_MARGIN
+        took_fewer = scores_better(fewer, true, sigma, dof, nb)
         took_more = False
         if more_ok:
             sigma = score_noise(more, dof)
-            took_more = bic_score(more, sigma, dof) < bic_score(true, sigma, dof) - SCORE_MARGIN
+            took_more = scores_better(more, true, sigma, dof, nb)
         out.append((bool(took_fewer), bool(took_more)))
     return out
 
@@ -337,7 +340,8 @@ def build_report(args: argparse.Namespace, argv: Sequence[str], streams: List[Di
     head = common.run_header(
         'Number of bodies found online', common.command_line('count', argv),
         {'Pipeline': "`num_bodies=0` against the count given; the method's own `window`, "
-                     + ', '.join(f'{get_method(m).window} ({m})' for m in args.method_list)
+                     + ', '.join(f"{window_frames({'window': 0, 'method': m})} ({m})"
+                                 for m in args.method_list)
                      + f'; stamps at {FPS:g} frames/s',
          'Threads': 'single (`cv2.setNumThreads(1)`); CPU ratios within the same run',
          'Run time': f'{seconds:.0f} s'}, revision)
@@ -423,10 +427,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench count',
                                 description=__doc__.split('\n')[1])
     p.add_argument('--real-dir', default=REAL_DIR, help=f'real sequences (default {REAL_DIR})')
-    common.add_methods_option(p, 'robust,general')
+    common.add_methods_option(p, 'robust,general,auto')
     p.add_argument('--seeds', default='0,1,2,3,4,5', help='seeds of the scheduled stream')
     p.add_argument('--hopkins-methods', default='robust,general',
-                   help="methods of the Hopkins155 streams (robust,general); '' skips them")
+                   help="methods of the Hopkins155 streams (robust,general,auto); '' skips them")
     p.add_argument('--hopkins-sequences', type=int, default=None,
                    help='stream only the first this many Hopkins155 sequences')
     p.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1),
@@ -463,7 +467,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     streams, reals = [], []
     sequences = {name: read_real_sequence(os.path.join(args.real_dir, name)) for name in REAL}
     for method in args.method_list:
-        window = get_method(method).window
+        window = window_frames({'window': 0, 'method': method})
         for seed in args.seed_list:
             common.eprint(f'count: scheduled, {method}, seed {seed}')
             run = stream_run(seed, method)
