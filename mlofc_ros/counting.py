@@ -42,12 +42,14 @@ Both compare the BIC of :func:`~mlofc_ros.solver.model_selection.bic_score` at o
 the richer model's (so that the poorer cannot hide behind a larger noise; the level the
 method reports, or its costs' own scale where more than :data:`SCORE_UNEXPLAINED` of the
 tracks would be outliers at that level: :func:`score_noise`), a change must
-win by :data:`SCORE_MARGIN`, and for :data:`HOLD` solves after a change the count does not go
-back (no flicker between two counts that score alike). A trial costs a warm solve, a search
-10-30 of them: on the scheduled stream of ``bench count`` the automatic count costs 0.9-1.4x
-the CPU of the count given with ``'robust'``, 0.7-2.3x with ``'general'`` (whose trial of one
-more body is a step when the step holds, its new body fitted from the pivot starts, else a
-tracked solve: 0.75-2.9x when every such trial was a tracked solve).
+win by :data:`SCORE_MARGIN` under two priors on the labels, a uniform one and one that knows
+bodies are compact in the image (:func:`scores_better`), and for :data:`HOLD` solves after a
+change the count does not go back (no flicker between two counts that score alike). A trial
+costs a warm solve, a search 10-30 of them: on the scheduled stream of ``bench count`` the
+automatic count costs 0.9-1.4x the CPU of the count given with ``'robust'``, 0.7-2.3x with
+``'general'`` (whose trial of one more body is a step when the step holds, its new body
+fitted from the pivot starts, else a tracked solve: 0.75-2.9x when every such trial was a
+tracked solve).
 """
 from typing import Callable, List, Optional, Sequence, Tuple
 

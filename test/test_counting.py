@@ -18,10 +18,11 @@ from typing import List
 from mlofc_ros.bodies import BodyTracker
 from mlofc_ros.counting import (birth_candidate, BodyCount, compact_labels, HOLD,
                                 in_view, IN_VIEW_FRAMES, merge_candidate, MERGE_CHI2,
-                                score_noise, SEARCH_EVERY, split_pair)
+                                SCORE_MARGIN, score_noise, scores_better, SEARCH_EVERY,
+                                split_pair)
 from mlofc_ros.pipeline import Pipeline
 from mlofc_ros.solver import get_method
-from mlofc_ros.solver.model_selection import min_body_lines
+from mlofc_ros.solver.model_selection import bic_score, min_body_lines, track_neighbours
 from mlofc_ros.solver.result import Diagnostics, SegmentationResult
 from mlofc_ros.solver.warm import WarmStarts
 from mlofc_tools.bench import count
@@ -100,6 +101,40 @@ def test_a_change_of_count_needs_a_better_score():
     # no labels to start from (the tracker restarted): searched again
     count.solve(tracks, np.full(100, -1), solve)
     assert count.last_change == 'search' and calls[-1] == 0
+
+
+def test_a_change_of_count_must_win_under_both_label_priors():
+    """
+    One body more must win under the uniform label prior, one less under the compact one.
+
+    Two compact halves of the image, each fitted a little better by a body of its own: the
+    neighbours' prior takes the split, the uniform one does not, and neither count is left
+    for the other (no flicker between counts that score alike under one prior or the other).
+    """
+    rng = np.random.default_rng(5)
+    points = rng.uniform(0.0, 640.0, (100, 2))
+    seg = np.hstack([points - [5.0, 0.0], points + [5.0, 0.0]])
+    near = track_neighbours(np.repeat(seg[:, None, :], 5, axis=1))
+    dof = np.full(100, 8.0)
+    halves = (points[:, 0] > 320.0).astype(int)
+
+    def fitted(labels, n, gain):
+        # every track costs 4 px^2 under one body, 4 (1 - gain) under its half's own
+        costs = np.full((100, n), 4.0 * (1.0 - gain) if n > 1 else 4.0)
+        return replace(_result(labels, np.zeros((n, 3))), costs=costs,
+                       diagnostics=Diagnostics(sigma_px=1.0))
+    one = fitted(np.zeros(100, dtype=int), 1, 0.0)
+    split = fitted(halves, 2, 0.12)
+    # 800 rows: 800 log(0.88) = -102 against 3 log 800 = 20 parameters and a label term of
+    # 139 (uniform) or about 40 (compact halves)
+    assert not scores_better(split, one, 1.0, dof, near)
+    assert not scores_better(one, split, 1.0, dof, near)
+    # each prior alone: the neighbours' takes the split, the uniform one keeps one body
+    assert bic_score(split, 1.0, dof, near) < bic_score(one, 1.0, dof, near) - SCORE_MARGIN
+    assert bic_score(one, 1.0, dof) < bic_score(split, 1.0, dof) - SCORE_MARGIN
+    clear = fitted(halves, 2, 0.3)
+    assert scores_better(clear, one, 1.0, dof, near)
+    assert not scores_better(one, clear, 1.0, dof, near)
 
 
 def test_a_reported_noise_below_the_costs_scale_does_not_hide_a_body():

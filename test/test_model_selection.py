@@ -16,7 +16,8 @@
 from dataclasses import replace
 import warnings
 
-from mlofc_ros.solver.model_selection import bic_score, unexplained
+from mlofc_ros.solver.model_selection import (bic_score, label_cost, track_neighbours,
+                                              unexplained)
 from mlofc_ros.solver.models import chi2_quantile
 from mlofc_ros.solver.result import SegmentationResult
 from mlofc_ros.solver.robust import OUTLIER_P
@@ -78,3 +79,39 @@ def test_a_body_that_translates_costs_six_parameters():
     rotation = replace(_result(costs, labels), method='robust')
     assert np.isclose(bic_score(_result(costs, labels), 1.0, dof) - bic_score(rotation, 1.0, dof),
                       3 * 2 * np.log(dof.sum()))
+
+
+def _tracks_at(points: np.ndarray) -> np.ndarray:
+    """Tracks ``(N, 5, 4)``: a short segment about each point, still over 5 frames."""
+    seg = np.hstack([points - [5.0, 0.0], points + [5.0, 0.0]])
+    return np.repeat(seg[:, None, :], 5, axis=1)
+
+
+def test_the_label_prior_knows_bodies_are_compact():
+    """Labels in compact regions cost little, labels mixed among neighbours 2 log n each."""
+    rng = np.random.default_rng(3)
+    points = rng.uniform(0.0, 640.0, (200, 2))
+    near = track_neighbours(_tracks_at(points))
+    usable = np.ones(200, dtype=bool)
+    compact = (points[:, 0] > 320.0).astype(int)
+    mixed = rng.integers(0, 2, 200)
+    uniform = label_cost(compact, 2, usable)
+    assert np.isclose(uniform, 2.0 * 200 * np.log(2.0)) and uniform == label_cost(mixed, 2, usable)
+    assert label_cost(compact, 2, usable, near) < 0.4 * uniform
+    assert 0.9 * uniform < label_cost(mixed, 2, usable, near) < 1.3 * uniform
+    assert label_cost(np.zeros(200, dtype=int), 1, usable, near) == 0.0
+    # only usable tracks count, an unlabelled one 2 log n as under the uniform prior
+    fewer = usable.copy()
+    fewer[:50] = False
+    assert label_cost(compact, 2, fewer, near) < label_cost(compact, 2, usable, near)
+    loose = compact.copy()
+    loose[0] = -1
+    one = np.zeros(200, dtype=bool)
+    one[0] = True
+    assert np.isclose(label_cost(loose, 2, one, near), 2.0 * np.log(2.0))
+    # the score takes it in place of 2 N log n
+    costs = rng.uniform(0.1, 2.0, (200, 2))
+    res = _result(costs, compact)
+    dof = np.full(200, 8.0)
+    assert np.isclose(bic_score(res, 1.0, dof) - bic_score(res, 1.0, dof, near),
+                      uniform - label_cost(compact, 2, usable, near))
