@@ -246,7 +246,6 @@ class BodyCount:
             self.n, self._since_birth, self.last_change = res.n_bodies, 0, 'search'
             return res
         dof = track_dof(tracks)
-        near = track_neighbours(tracks)    # the score's label term reads them
         current = list(range(self.n))
         res = solve(self.n, np.asarray(previous), current)
         sigma = score_noise(res, dof)
@@ -267,7 +266,7 @@ class BodyCount:
             # view keeps tracks in the window's older frames that only its motion explains
             scored = dof if keep >= 0 else np.where(visible, dof, 0.0)
             trial = _trial(solve, self.n - 1, labels, [b for b in current if b != gone])
-            if trial is not None and scores_better(trial, res, sigma, scored, near):
+            if trial is not None and scores_better(trial, res, sigma, scored, tracks):
                 self.n, self.last_change = self.n - 1, 'merge'
                 self._last, self._since_change = 'merge', 0
                 if keep >= 0:
@@ -280,7 +279,7 @@ class BodyCount:
         if born is None:
             if (self._since_search >= self._search_wait and settled
                     and self.n < MAX_BODIES):
-                return self._split(res, dof, solve, current, near)
+                return self._split(res, dof, solve, current, tracks)
             return res
         self._since_birth = 0
         loose = born == self.n
@@ -293,7 +292,7 @@ class BodyCount:
             proposals.append(np.where(loose, -1, born))
         for labels in proposals:
             trial = _trial(solve, self.n + 1, labels, current + [-1])
-            if self._takes_birth(trial, res, dof, near):
+            if self._takes_birth(trial, res, dof, tracks):
                 self._born(_newest(trial.labels, loose))
                 return trial
         if len(proposals) > 1:
@@ -302,7 +301,7 @@ class BodyCount:
         return res
 
     def _split(self, res: SegmentationResult, dof: np.ndarray, solve: Solve,
-               current: List[int], near: np.ndarray) -> SegmentationResult:
+               current: List[int], tracks: np.ndarray) -> SegmentationResult:
         """
         Try one body more with the worst-fitting body's tracks unlabelled (a search there).
 
@@ -325,7 +324,7 @@ class BodyCount:
                else -np.inf for b in range(self.n)]                  # bodies, not lines
         loose = labels == int(np.argmax(fit))
         trial = _trial(solve, self.n + 1, np.where(loose, -1, labels), current + [-1])
-        if not self._takes_birth(trial, res, dof, near):
+        if not self._takes_birth(trial, res, dof, tracks):
             self._search_failed()
             return res
         # the two bodies holding most of the split body's tracks: the smaller one is new
@@ -336,18 +335,18 @@ class BodyCount:
         return trial
 
     def _takes_birth(self, trial: Optional[SegmentationResult], res: SegmentationResult,
-                     dof: np.ndarray, near: np.ndarray) -> bool:
+                     dof: np.ndarray, tracks: np.ndarray) -> bool:
         """
         Return whether a trial of one body more replaces ``res`` (the count's rules).
 
-        ``near (N, k)``: the tracks' image neighbours (the score's label term).
+        ``tracks (N, K, 4)``: the window's (their image neighbours enter the score).
         """
         if trial is None or trial.n_bodies != self.n + 1:
             return False
         counts = np.bincount(trial.labels[trial.labels >= 0], minlength=trial.n_bodies)
         richer = score_noise(trial, dof)
         return bool(np.all(counts >= min_body_lines(dof))
-                    and scores_better(trial, res, richer, dof, near)
+                    and scores_better(trial, res, richer, dof, tracks)
                     and split_pair(trial, richer, dof) is None)
 
     def _born(self, new_body: int) -> None:
@@ -365,18 +364,19 @@ class BodyCount:
 
 
 def scores_better(trial: SegmentationResult, res: SegmentationResult, sigma: Optional[float],
-                  dof: np.ndarray, near: np.ndarray) -> bool:
+                  dof: np.ndarray, tracks: np.ndarray) -> bool:
     """
     Return whether ``trial`` (another count) scores better than ``res`` by :data:`SCORE_MARGIN`.
 
     The BIC of both at noise ``sigma`` (px) over the tracks with ``dof > 0``, under both
     label priors (:func:`~mlofc_ros.solver.model_selection.label_cost`): the uniform one and
-    the tracks' image neighbours ``near (N, k)``. A body more must win under the uniform
-    prior, which charges its labels most; a body less under the neighbours', which charges
-    compact bodies least: the count changes only where both agree.
+    the image neighbours of the window's ``tracks (N, K, 4)`` (found here, only for a trial:
+    a frame that tries no other count does not pay for them). A body more must win under the
+    uniform prior, which charges its labels most; a body less under the neighbours', which
+    charges compact bodies least: the count changes only where both agree.
     """
     return all(bic_score(trial, sigma, dof, nb) < bic_score(res, sigma, dof, nb) - SCORE_MARGIN
-               for nb in (None, near))
+               for nb in (None, track_neighbours(tracks)))
 
 
 def split_pair(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray

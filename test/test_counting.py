@@ -114,7 +114,8 @@ def test_a_change_of_count_must_win_under_both_label_priors():
     rng = np.random.default_rng(5)
     points = rng.uniform(0.0, 640.0, (100, 2))
     seg = np.hstack([points - [5.0, 0.0], points + [5.0, 0.0]])
-    near = track_neighbours(np.repeat(seg[:, None, :], 5, axis=1))
+    tracks = np.repeat(seg[:, None, :], 5, axis=1)
+    near = track_neighbours(tracks)
     dof = np.full(100, 8.0)
     halves = (points[:, 0] > 320.0).astype(int)
 
@@ -127,14 +128,14 @@ def test_a_change_of_count_must_win_under_both_label_priors():
     split = fitted(halves, 2, 0.12)
     # 800 rows: 800 log(0.88) = -102 against 3 log 800 = 20 parameters and a label term of
     # 139 (uniform) or about 40 (compact halves)
-    assert not scores_better(split, one, 1.0, dof, near)
-    assert not scores_better(one, split, 1.0, dof, near)
+    assert not scores_better(split, one, 1.0, dof, tracks)
+    assert not scores_better(one, split, 1.0, dof, tracks)
     # each prior alone: the neighbours' takes the split, the uniform one keeps one body
     assert bic_score(split, 1.0, dof, near) < bic_score(one, 1.0, dof, near) - SCORE_MARGIN
     assert bic_score(one, 1.0, dof) < bic_score(split, 1.0, dof) - SCORE_MARGIN
     clear = fitted(halves, 2, 0.3)
-    assert scores_better(clear, one, 1.0, dof, near)
-    assert not scores_better(one, clear, 1.0, dof, near)
+    assert scores_better(clear, one, 1.0, dof, tracks)
+    assert not scores_better(one, clear, 1.0, dof, tracks)
 
 
 def test_a_reported_noise_below_the_costs_scale_does_not_hide_a_body():

@@ -70,7 +70,7 @@ import cv2
 from mlofc_ros.counting import score_noise, scores_better
 from mlofc_ros.pipeline import FrameResult, Pipeline, window_frames
 from mlofc_ros.solver import segment_lines
-from mlofc_ros.solver.model_selection import min_body_lines, track_dof, track_neighbours
+from mlofc_ros.solver.model_selection import min_body_lines, track_dof
 from mlofc_tools.bench import common
 from mlofc_tools.bench.hopkins_runs import LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX
 from mlofc_tools.bench.pipeline import read_real_sequence, REAL_DIR
@@ -214,7 +214,6 @@ def score_preference(tracks: np.ndarray, truth: np.ndarray, n: int,
         seen = np.all(np.isfinite(win[..., 0]), axis=1)
         win, labels = win[seen], np.unique(truth[seen], return_inverse=True)[1]
         dof = track_dof(win)
-        nb = track_neighbours(win)
         try:
             true = segment_lines(win, n, init_labels=labels, **kw)
             fewer = segment_lines(win, n - 1, **kw)
@@ -227,11 +226,11 @@ def score_preference(tracks: np.ndarray, truth: np.ndarray, n: int,
         except ValueError:
             more_ok = False
         sigma = score_noise(true, dof)
-        took_fewer = scores_better(fewer, true, sigma, dof, nb)
+        took_fewer = scores_better(fewer, true, sigma, dof, win)
         took_more = False
         if more_ok:
             sigma = score_noise(more, dof)
-            took_more = scores_better(more, true, sigma, dof, nb)
+            took_more = scores_better(more, true, sigma, dof, win)
         out.append((bool(took_fewer), bool(took_more)))
     return out
 
