@@ -17,8 +17,9 @@ from mlofc_ros.solver.general import (body_covariance, fit_body, fit_body_multis
                                       general_costs, general_warm, line_residuals,
                                       LineObservations, marginal_residuals,
                                       marginal_segmentation, necker_mirror,
-                                      PIVOT_KEEP, pivot_picks, PIVOT_RATES, PIVOT_W,
-                                      polish_body, position_costs)
+                                      NOISE_FACTOR, PIVOT_KEEP, pivot_picks, PIVOT_RATES,
+                                      PIVOT_W, polish_body, position_costs)
+from mlofc_ros.solver.general import search
 from mlofc_ros.solver.general.eigen import smallest_eigenpair
 from mlofc_ros.solver.general.fit import _lm_runs, robust_scale
 from mlofc_ros.solver.general.jacobian import left_jacobian, normal_equations
@@ -296,6 +297,34 @@ def test_warm_path_sorts_out_stale_labels_and_repairs_a_wrong_grouping():
         assert res.diagnostics.start == 'warm'
         assert res.labels[3] == 0
         assert np.count_nonzero(res.labels != truth) <= 1   # one line fits both bodies
+
+
+def test_split_and_merge_moves_repair_two_objects_merged_and_one_split(monkeypatch):
+    # two boxes turning alike at different places (one rotation, two translations) held by one
+    # body while a third box is split over two: the fit/assign rounds move one track at a time
+    # and stay there; the move merging the halves and splitting the two regions finds the boxes
+    alike = [small_spinning_body(5, centre=c, noise=0.05)[0]
+             for c in ((-1.2, -0.6, 6.0), (1.2, 0.7, 6.5))]
+    other = small_spinning_body(8, centre=(1.0, -0.9, 5.5), deg=-4.0, noise=0.05)[0]
+    tracks = np.concatenate(alike + [other])
+    truth = np.repeat([0, 1, 2], 25)
+    start = np.repeat([0, 0, 1], 25)
+    start[50::2] = 2
+    obs = LineObservations(tracks, (F, F, C, C))
+
+    def segment():
+        return marginal_segmentation(obs, 3, [('start', start)], np.zeros((3, 3)),
+                                     np.zeros((3, 3)), NOISE_FACTOR * 0.05 ** 2,
+                                     points=obs.midpoints)
+
+    sol = segment()
+    assert sol['start'] == 'start+split-merge'
+    pairs = set(zip(sol['labels'].tolist(), truth.tolist()))
+    assert len(pairs) == 3 and len({p[0] for p in pairs}) == 3
+    monkeypatch.setattr(search, 'split_merge_starts', lambda points, sol: [])
+    stuck = segment()
+    assert stuck['start'] == 'start'
+    assert len(set(zip(stuck['labels'].tolist(), truth.tolist()))) > 3
 
 
 def test_batched_evaluations_and_lockstep_fits_match_single_ones():

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 """Spatial coherence prior (``mlofc_ros.solver.spatial``)."""
-from mlofc_ros.solver.spatial import label_coherence, smooth_labels, spatial_neighbours
+from mlofc_ros.solver.spatial import (label_coherence, largest_region, smooth_labels,
+                                      spatial_neighbours, track_spacing)
 import numpy as np
 
 
@@ -79,3 +80,16 @@ def test_smoothing_leaves_mixed_scenes_alone():
     out, coupling = smooth_labels(costs, truth, spatial_neighbours(pts))
     assert np.array_equal(out, truth)
     assert coupling < 0.2 * 1.0
+
+
+def test_largest_region_parts_a_compact_object_from_what_lies_elsewhere():
+    rng = np.random.default_rng(2)
+    box = rng.normal((200.0, 150.0), 20.0, (30, 2))               # one object's lines
+    wall = np.array([[20.0, 20.0], [620.0, 30.0], [600.0, 460.0], [30.0, 450.0]])
+    other = rng.normal((500.0, 300.0), 15.0, (10, 2))             # a smaller object
+    points = np.concatenate([wall[:2], box, other, wall[2:]])
+    spacing = track_spacing(points)
+    assert spacing == np.sqrt(np.prod(np.ptp(points, axis=0)) / len(points))
+    region = largest_region(points, spacing)
+    assert np.array_equal(np.flatnonzero(region), np.arange(2, 32))
+    assert largest_region(box, spacing).all()                      # one region: all of it

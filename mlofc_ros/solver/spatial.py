@@ -213,3 +213,44 @@ def smooth_labels(costs: np.ndarray, labels: np.ndarray, neighbours: np.ndarray,
             break
         lab = new
     return lab, coupling
+
+
+#: Two tracks are in one region of the image (:func:`largest_region`) when their midpoints are
+#: within this many times the tracks' mean spacing (:func:`track_spacing`): a box's lines are
+#: about one spacing apart, two boxes or a box and the wall behind it several.
+REGION_REACH = 1.5
+
+
+def track_spacing(points: np.ndarray) -> float:
+    """
+    Return the mean spacing (px) of points ``(N, 2)``: ``sqrt(area / N)`` of their bounding box.
+
+    ``N >= 1``; at least 1 px^2 of area.
+    """
+    pts = np.asarray(points, dtype=float)
+    extent = pts.max(axis=0) - pts.min(axis=0)
+    return float(np.sqrt(max(float(extent[0] * extent[1]), 1.0) / pts.shape[0]))
+
+
+def largest_region(points: np.ndarray, spacing: float, reach: float = REGION_REACH
+                   ) -> np.ndarray:
+    """
+    Return the largest region ``(N,)`` bool of points ``(N, 2)`` (px): a connected component.
+
+    Two points are linked when within ``reach * spacing`` px (single linkage); the component
+    with the most points is returned (the first such when several tie). All True when the
+    points form one region.
+    """
+    pts = np.asarray(points, dtype=float)
+    d2 = np.sum((pts[:, None, :] - pts[None, :, :]) ** 2, axis=-1)
+    near = d2 <= (reach * spacing) ** 2
+    # every point takes the smallest index among its neighbours until none changes: each
+    # component ends labelled by its smallest index (steps: the component's diameter in links)
+    comp = np.arange(pts.shape[0])
+    while True:
+        nxt = np.min(np.where(near, comp[None, :], pts.shape[0]), axis=1)
+        if np.array_equal(nxt, comp):
+            break
+        comp = nxt
+    sizes = np.bincount(comp, minlength=pts.shape[0])
+    return comp == int(np.argmax(sizes))
