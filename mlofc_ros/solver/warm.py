@@ -239,10 +239,8 @@ class WarmStarts:
         Note a solve by ``method``: the full solves due, the noise, the rescans, the bar.
 
         ``res``: its result; its ``diagnostics.start`` tells a step (``'step'``), a tracked
-        full solve (``'warm'``) and a search apart (a tracked solve whose grouping a
-        split-and-merge move changed, ``'warm+split-merge'``, counts as a search).
-        ``stamp``: the window's newest frame (s), ``interval``: the frame interval (s), to
-        count the frames since a search.
+        full solve (``'warm'``) and a search apart. ``stamp``: the window's newest frame (s),
+        ``interval``: the frame interval (s), to count the frames since a search.
         """
         start, noise = res.diagnostics.start, res.diagnostics.sigma_px
         if start == 'step':
