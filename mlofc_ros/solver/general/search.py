@@ -238,11 +238,11 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
     From every start, rounds of LM fits of every body and assignment of every track
     (:func:`_fit_assign`); then, from the best start's solution, the split-and-merge moves of
     :func:`split_merge_starts`, each kept when it scores lower. Bench spinning (30 frames,
-    seeds 0-2), wrong % with ``'general'`` own3+bg / own3 / wide2+bg 8.4 / 7.7 / 5.8 -> 1.1 /
-    0.2 / 4.5 (worst seed 24 / 23 / 9.5 -> 2.0 / 0.5 / 5.3); 300 frames through the pipeline
-    with ``'auto'`` (every frame solved, seeds 0-5), own2+bg / own3+bg 2.0 / 1.8 -> 1.0 / 1.3
-    (worst 6.9 / 4.4 -> 2.0 / 1.9), the same mean CPU per frame; Hopkins155 three motions
-    streamed 8.4 -> 8.0%.
+    seeds 0-2), wrong % with ``'general'`` own3+bg / own3 / wide2+bg 8.4 / 7.7 / 5.8 -> 1.2 /
+    0.1 / 4.5 (worst seed 24 / 23 / 9.5 -> 2.5 / 0.3 / 5.4), ``'auto'`` wide3 12.6 -> 4.5;
+    300 frames through the pipeline with ``'auto'`` (every frame solved, seeds 0-5),
+    own2+bg / own3+bg 2.0 / 1.8 -> 1.0 / 1.7 (worst 6.9 / 4.4 -> 2.0 / 3.8); Hopkins155
+    three motions streamed with ``'auto'`` 8.4 -> 7.7%.
 
     Parameters
     ----------
