@@ -244,11 +244,13 @@ def largest_region(points: np.ndarray, spacing: float, reach: float = REGION_REA
     pts = np.asarray(points, dtype=float)
     d2 = np.sum((pts[:, None, :] - pts[None, :, :]) ** 2, axis=-1)
     near = d2 <= (reach * spacing) ** 2
-    # every point takes the smallest index among its neighbours until none changes: each
-    # component ends labelled by its smallest index (steps: the component's diameter in links)
+    # every point takes the smallest label among its neighbours, then its label's label
+    # (pointer jumping: steps grow with the log of a component's diameter, not the diameter)
+    # until none changes: each component ends labelled by its smallest index
     comp = np.arange(pts.shape[0])
     while True:
         nxt = np.min(np.where(near, comp[None, :], pts.shape[0]), axis=1)
+        nxt = nxt[nxt]
         if np.array_equal(nxt, comp):
             break
         comp = nxt

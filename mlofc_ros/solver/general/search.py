@@ -356,8 +356,8 @@ def split_merge_starts(points: np.ndarray, sol: dict) -> list:
     (``labels (N,)``, ``costs (N, n)``, ``cap (N,)``, ``W``, ``T (n, 3)``). Returns
     ``(labels (N,), W (n, 3), T (n, 3), fitted (n,) bool)`` per start: the merged pair's
     survivor and the rest of the split body keep their motions, the largest region starts
-    unfitted (a multi-start search from the split body's motion). None with fewer than
-    :data:`SPLIT_MERGE_BODIES` bodies.
+    unfitted (a multi-start search from the split body's motion). No start with fewer than
+    :data:`SPLIT_MERGE_BODIES` bodies or no labelled track.
     """
     labels = np.asarray(sol['labels'])
     n = sol['W'].shape[0]
