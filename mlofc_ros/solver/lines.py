@@ -278,6 +278,15 @@ def _pair_basis(m: np.ndarray) -> np.ndarray:
     return out
 
 
+def pair_components(m: np.ndarray) -> np.ndarray:
+    """
+    Return :func:`orthonormal_pair` components first: ``m (3, ...)`` -> ``E (3, 2, ...)``.
+
+    ``E[:, c]`` is the basis vector ``c`` of the plane orthogonal to each ``m[:, ...]``.
+    """
+    return _pair_basis(np.asarray(m, dtype=float))[:3]
+
+
 def orthonormal_pair(m: np.ndarray) -> np.ndarray:
     """
     Orthonormal basis ``E (..., 3, 2)`` of the plane orthogonal to each vector ``m (..., 3)``.

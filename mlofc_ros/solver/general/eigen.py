@@ -24,60 +24,66 @@ import numpy as np
 from ..lines import orthonormal_pair
 
 
+#: Index of a 3x3 matrix extended to 5x5 (rows and columns 0, 1, 2, 0, 1), so that its
+#: cofactors are slices (:func:`_cofactors`).
+_ROLLED = np.ix_([0, 1, 2, 0, 1], [0, 1, 2, 0, 1])
+
+
+def _cofactors(A: np.ndarray) -> np.ndarray:
+    """
+    Return the cofactor matrices ``(3, 3, ...)`` of the 3x3 matrices ``A (3, 3, ...)``.
+
+    Row ``i`` of a symmetric matrix's cofactors is the cross product of its other two rows.
+    """
+    X = A[_ROLLED]                                                   # (5, 5, ...)
+    return X[1:4, 1:4] * X[2:5, 2:5] - X[1:4, 2:5] * X[2:5, 1:4]
+
+
 def smallest_eigenpair(C: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """
     Return the smallest eigenvalue ``(...)`` and a unit eigenvector ``(..., 3)`` of ``C``.
 
-    ``C (..., 3, 3)`` symmetric. Closed form, element-wise over the batch: the eigenvalue by the
-    trigonometric formula, the eigenvector as the largest cross product of two rows of
-    ``C - lam I`` (its null vector), then the eigenvalue again as that vector's Rayleigh
-    quotient: accurate to rounding of the largest eigenvalue, as LAPACK's. Where the two
-    smallest eigenvalues (nearly) coincide the cross products vanish; there
-    :func:`_flat_eigenvector` solves in the plane orthogonal to the largest row. On batches
-    of tens to hundreds of matrices (the solver's) this is 2-3x faster than
-    ``np.linalg.eigh``, whose per-matrix LAPACK call dominates.
+    ``C (..., 3, 3)`` symmetric; :func:`smallest_eigenpair_stacked` of its entries.
     """
-    return smallest_eigenpair_parts(C[..., 0, 0], C[..., 0, 1], C[..., 0, 2], C[..., 1, 1],
-                                    C[..., 1, 2], C[..., 2, 2])
+    lam, v = smallest_eigenpair_stacked(np.moveaxis(C, (-2, -1), (0, 1)))
+    return lam, np.moveaxis(v, 0, -1)
 
 
-def smallest_eigenpair_parts(a00: np.ndarray, a01: np.ndarray, a02: np.ndarray,
-                             a11: np.ndarray, a12: np.ndarray, a22: np.ndarray
-                             ) -> Tuple[np.ndarray, np.ndarray]:
-    """Return :func:`smallest_eigenpair` of the symmetric matrices with these entries."""
-    q = (a00 + a11 + a22) / 3.0
-    b00, b11, b22 = a00 - q, a11 - q, a22 - q
-    s01, s02, s12 = a01 * a01, a02 * a02, a12 * a12
-    p = np.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (s01 + s02 + s12)) / 6.0)
-    det = b00 * b11 * b22 + 2.0 * a01 * a02 * a12 - b00 * s12 - b11 * s02 - b22 * s01
+def smallest_eigenpair_stacked(C: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return the smallest eigenvalue ``(...)`` and a unit eigenvector ``(3, ...)`` of ``C``.
+
+    ``C (3, 3, ...)``: symmetric matrices, entries first (the solver's lines-last layout).
+    Closed form, element-wise over the batch: the eigenvalue by the trigonometric formula, the
+    eigenvector as the largest cross product of two rows of ``C - lam I`` (its null vector),
+    then the eigenvalue again as that vector's Rayleigh quotient: accurate to rounding of the
+    largest eigenvalue, as LAPACK's. Where the two smallest eigenvalues (nearly) coincide the
+    cross products vanish; there :func:`_flat_eigenvector` solves in the plane orthogonal to
+    the largest row. On batches of tens to hundreds of matrices (the solver's) this is 2-3x
+    faster than ``np.linalg.eigh``, whose per-matrix LAPACK call dominates; the rows and
+    their cross products go stacked, a few numpy calls for all nine entries.
+    """
+    eye = np.eye(3).reshape((3, 3) + (1,) * (C.ndim - 2))
+    q = (C[0, 0] + C[1, 1] + C[2, 2]) / 3.0
+    B = C - q * eye
+    p = np.sqrt(np.einsum('ij...,ij...->...', B, B) / 6.0)
+    det = np.einsum('j...,j...->...', B[0], _cofactors(B)[0])
     r = np.minimum(np.maximum(det / np.maximum(2.0 * p * p * p, 1e-300), -1.0), 1.0)
     lam = q + 2.0 * p * np.cos(np.arccos(r) / 3.0 + 2.0 * np.pi / 3.0)
-    c00, c11, c22 = a00 - lam, a11 - lam, a22 - lam
-    # cross products of the rows (0, 1), (0, 2), (1, 2) of the symmetric C - lam I
-    x = [a01 * a12 - a02 * c11, a01 * c22 - a02 * a12, c11 * c22 - a12 * a12]
-    y = [a02 * a01 - c00 * a12, a02 * a02 - c00 * c22, a12 * a02 - a01 * c22]
-    z = [c00 * c11 - a01 * a01, c00 * a12 - a01 * a02, a01 * a12 - c11 * a02]
-    nn = [x[i] * x[i] + y[i] * y[i] + z[i] * z[i] for i in range(3)]
-    vx, vy, vz, best = x[0], y[0], z[0], nn[0]
-    for i in (1, 2):                                     # three candidates, not lines
-        take = nn[i] > best
-        vx, vy, vz = np.where(take, x[i], vx), np.where(take, y[i], vy), np.where(take, z[i], vz)
-        best = np.maximum(best, nn[i])
+    D = C - lam * eye
+    # the cross products of the rows of C - lam I: its cofactors' rows; the largest
+    cross = _cofactors(D)
+    nn = np.einsum('ij...,ij...->i...', cross, cross)
+    v = np.choose(np.argmax(nn, axis=0), cross)                     # (3, ...)
     # cofactors (~ s1 s2, singular values of C - lam I) below 1e-6 of the squared row scale
     # (~ s1^2): C - lam I is of rank one to that precision, the two smallest eigenvalues
     # (nearly) coincide (rare: a line with about one constraint)
-    rn = [c00 * c00 + s01 + s02, s01 + c11 * c11 + s12, s02 + s12 + c22 * c22]
-    flat = best <= 1e-12 * np.maximum(np.maximum(rn[0], rn[1]), rn[2]) ** 2
-    v = np.stack([vx, vy, vz], axis=-1)
-    if np.any(flat):
-        C = np.stack([np.stack([a00, a01, a02], -1), np.stack([a01, a11, a12], -1),
-                      np.stack([a02, a12, a22], -1)], -2)
-        v[flat] = _flat_eigenvector(C[flat], lam[flat])
-    v /= np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
-    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
-    lam = (a00 * vx * vx + a11 * vy * vy + a22 * vz * vz
-           + 2.0 * (a01 * vx * vy + a02 * vx * vz + a12 * vy * vz))
-    return lam, v
+    flat = nn.max(axis=0) <= 1e-12 * np.einsum('ij...,ij...->i...', D, D).max(axis=0) ** 2
+    if flat.any():
+        v[:, flat] = _flat_eigenvector(np.moveaxis(C[:, :, flat], (0, 1), (-2, -1)),
+                                       lam[flat]).T
+    v /= np.maximum(np.sqrt(np.einsum('i...,i...->...', v, v)), 1e-300)
+    return np.einsum('i...,ij...,j...->...', v, C, v), v
 
 
 def _flat_eigenvector(C: np.ndarray, lam: np.ndarray) -> np.ndarray:
