@@ -82,10 +82,11 @@ RESCAN_SWITCH_FLOOR = 2e-3
 #: its lines wrong failed every step and the next full solve started from it again (own3+bg,
 #: render seed 3: 196 of 300 frames answered from the running fit, 26% wrong). bench lane x1,
 #: render seeds 0-11, mean wrong % own2+bg / own3+bg (worst), boxes within 5% of their
-#: omega: 3.6 / 9.7 (10.2 / 26.5), 23 of 24 / 26 of 36 -> 3.9 / 8.0 (9.3 / 14.9), 22 / 28;
-#: the same with no guard on those steps; six of them instead of three (seeds 0-5) 7.0 / 8.5
-#: (29.7 / 15.4: a box lost for good); every track labelled afresh at each of the three
-#: steps' motions instead (no label prior: right labels drifted) 4.8 / 8.3 (15.8 / 16.0).
+#: omega: 3.6 / 9.7 (10.2 / 26.5), 23 of 24 / 26 of 36 -> 3.9 / 8.0 (9.3 / 14.9), 22 / 28.
+#: No guard at all on those steps gave the same figures; six such steps instead of three
+#: (seeds 0-5, no guard) 7.0 / 8.5 (29.7 / 15.4: a box lost for good); every track labelled
+#: afresh at each of the three steps' motions instead (no label prior: right labels
+#: drifted) 4.8 / 8.3 (15.8 / 16.0).
 ADOPTED_STEPS = 3
 ADOPTED_STEP_MOVES = 0.3
 
