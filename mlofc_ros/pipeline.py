@@ -954,13 +954,8 @@ class Pipeline:
             # too many failed the step's guard: own2+bg / own3+bg at 30 Hz replayed offline,
             # each solve's CPU x1.3 its delay, render seeds 0-2, 150 frames, frames answered
             # from the running fit 52 / 50 -> 23 / 12, wrong from frame 90 on 5.7 / 8.3 ->
-            # 4.3 / 2.7%), and the next steps may trade more tracks (.warm.ADOPTED_STEPS)
+            # 4.3 / 2.7%)
             keywords['init_labels'] = np.full_like(keywords['init_labels'], -1)
-            self._warm.answer_adopted()
-        else:
-            moves = self._warm.step_moves()
-            if moves is not None:
-                keywords['step_moves'] = moves
         try:
             return segment_lines(obs.win_tracks, n, step_only=True, **common, **keywords)
         except StepNotTaken as exc:

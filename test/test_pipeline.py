@@ -938,44 +938,6 @@ def test_a_lane_runs_the_full_solves_while_the_frames_step():
         _assert_bodies_right(r, truth, omegas)
 
 
-def test_the_steps_after_a_lane_answer_may_trade_more_tracks(monkeypatch):
-    # a lane's answer is of a window the stream has left: the first step from it labels every
-    # track afresh, the ADOPTED_STEPS after it may move more of the tracks, the later ones are
-    # held to the step's usual guard again
-    import mlofc_ros.pipeline as pipeline_module
-    from mlofc_ros.lane import InlineLane
-    from mlofc_ros.solver.warm import ADOPTED_STEP_MOVES, ADOPTED_STEPS
-    from scenes import random_scene
-    tracks, truth, omegas, intr = random_scene(2, 25, n_frames=30, noise=0.2, seed=3,
-                                               own_centre=True)
-    ids = np.arange(tracks.shape[0])
-    p = Pipeline(num_bodies=2, window=10, method='general')
-    p.use_lane(InlineLane(delay=4))
-    steps = {}                                  # frame -> (all labels fresh, step_moves)
-    real = pipeline_module.segment_lines
-
-    def record(*a, **k):
-        if k.get('step') and not k.get('rescan'):
-            steps[frame] = (bool(np.all(k['init_labels'] < 0)), k.get('step_moves'))
-        return real(*a, **k)
-
-    monkeypatch.setattr(pipeline_module, 'segment_lines', record)
-    adopted = []
-    real_adopt = pipeline_module.Pipeline._adopt
-    monkeypatch.setattr(pipeline_module.Pipeline, '_adopt',
-                        lambda self, finished, problems: real_adopt(self, finished, problems)
-                        and not adopted.append(frame))
-    for frame in range(tracks.shape[1]):
-        r = p.process_lines(ids, tracks[:, frame], frame / 30.0, (1000, 1000), intr)
-    first = adopted[0]                                  # the search's answer
-    assert steps[first] == (True, None)
-    free = range(first + 1, first + 1 + ADOPTED_STEPS)
-    assert all(steps[f] == (False, ADOPTED_STEP_MOVES) for f in free if f in steps)
-    later = [f for f in steps if f > free[-1] and not any(first < a <= f for a in adopted[1:])]
-    assert later and all(steps[f][1] is None for f in later)
-    _assert_bodies_right(r, truth, omegas)
-
-
 def _assert_bodies_right(r, truth, omegas):
     """Assert each body of ``r`` at most 2 lines wrong and within 5% of its true omega."""
     for s in range(len(omegas)):

@@ -187,8 +187,8 @@ def test_every_method_declares_what_its_callers_need():
     for name in METHODS:
         method = get_method(name)
         assert method.name == name and method.keywords <= {
-            'init_labels', 'init_motions', 'rescan', 'step', 'step_only', 'step_moves',
-            'warm_inliers', 'warm_competes'}
+            'init_labels', 'init_motions', 'rescan', 'step', 'step_only', 'warm_inliers',
+            'warm_competes'}
         # a method takes the previous window's labels exactly when it has a warm start
         assert ('init_labels' in method.keywords) == (method.warm_start is not WarmStart.NONE)
         assert ('init_motions' in method.keywords) == (method.warm_start is WarmStart.MOTIONS)

@@ -671,29 +671,6 @@ def test_a_tracking_step_falls_back_to_the_tracked_solve_where_it_cannot_step():
                       step=True)
 
 
-def test_a_step_moves_at_most_step_moves_of_the_labelled_tracks():
-    # a step whose labels trade many tracks does not hold (bodies do not trade many from one
-    # frame to the next); a caller that knows the labels are stale lifts the guard
-    from mlofc_ros.solver import StepNotTaken
-    tracks, truth, W, (w0, t0) = _two_spinning_bodies()
-    intr = (F, F, C, C)
-    stale = truth.copy()
-    swap = np.flatnonzero(truth == 0)[::3]               # a third of body 0's tracks
-    stale[swap] = 1
-    keywords = {'intrinsics': intr, 'method': 'general', 'init_labels': stale,
-                'init_motions': (w0, t0), 'step': True, 'step_only': True}
-    with pytest.raises(StepNotTaken):
-        segment_lines(tracks[:, 1:], 2, **keywords)
-    res = segment_lines(tracks[:, 1:], 2, step_moves=1.0, **keywords)
-    assert res.diagnostics.start == 'step'
-    assert np.count_nonzero(res.labels != truth) <= 1
-    with pytest.raises(ValueError, match='step_moves must be a share'):
-        segment_lines(tracks[:, 1:], 2, step_moves=1.5, **keywords)
-    with pytest.raises(ValueError, match='step_moves needs step'):
-        segment_lines(tracks, 2, intrinsics=intr, method='general', init_labels=truth,
-                      init_motions=(w0, t0), step_moves=1.0)
-
-
 def test_rescale_translation_finds_the_scale_of_a_translation_at_the_segmentation_noise():
     from mlofc_ros.solver.general import rescale_translation
     tracks, truth, _, (W, T) = _two_spinning_bodies()

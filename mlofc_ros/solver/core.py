@@ -90,8 +90,7 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
                   seed: int = 0, init_labels: Optional[np.ndarray] = None,
                   init_motions: Optional[Tuple[np.ndarray, np.ndarray]] = None,
                   rescan: Optional[Sequence[int]] = None, step: Optional[bool] = None,
-                  step_only: Optional[bool] = None, step_moves: Optional[float] = None,
-                  warm_inliers: Optional[float] = None,
+                  step_only: Optional[bool] = None, warm_inliers: Optional[float] = None,
                   warm_competes: Optional[bool] = None) -> SegmentationResult:
     """
     Segment line tracks into rigid bodies by their rotation (multibody line optical flow).
@@ -151,11 +150,6 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
         'general', with ``step``: when true and the step does not hold, raise
         :class:`.StepNotTaken` instead of running the tracked solve (a caller that runs the
         full solves elsewhere: the pipeline's solver lane, :mod:`mlofc_ros.lane`).
-    step_moves : float, optional
-        'general', with ``step``: the largest share of the labelled tracks a step may move to
-        another body and still hold (default :data:`.general_method.STEP_MOVES`, 0.1: bodies
-        do not trade many tracks from one frame to the next); 1: any. A stream loosens it for
-        the steps after a late answer (:data:`.warm.ADOPTED_STEPS`).
     warm_inliers : float, optional
         'robust', with ``init_labels``: the share of the usable tracks that the previous
         labels' final pass must keep as inliers to be returned without a search (default
@@ -184,8 +178,8 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
     ValueError
         Wrong shape, K < 2, non-finite intrinsics, ``n_bodies < 0``, unknown method, a
         keyword the method does not accept, ``init_labels`` of another length than the tracks,
-        ``warm_inliers`` or ``step_moves`` outside [0, 1], malformed ``init_motions`` or
-        ``rescan``, or fewer usable tracks than the model needs.
+        ``warm_inliers`` outside [0, 1], malformed ``init_motions`` or ``rescan``, or fewer
+        usable tracks than the model needs.
     StepNotTaken
         With ``step_only``: the step did not hold.
 
@@ -198,7 +192,6 @@ def segment_lines(tracks, n_bodies: int, intrinsics: Optional[Sequence[float]] =
                                            ('init_motions', init_motions),
                                            ('rescan', rescan), ('step', step),
                                            ('step_only', step_only),
-                                           ('step_moves', step_moves),
                                            ('warm_inliers', warm_inliers),
                                            ('warm_competes', warm_competes))
              if value is not None}
@@ -266,13 +259,6 @@ def _check_keywords(spec: Method, n: int, n_tracks: int, given: Dict[str, Any]
         if 'step' not in given:
             raise ValueError('step_only needs step')
         out['step_only'] = bool(given['step_only'])
-    if 'step_moves' in given:
-        if 'step' not in given:
-            raise ValueError('step_moves needs step')
-        share = float(given['step_moves'])
-        if not 0.0 <= share <= 1.0:
-            raise ValueError(f'step_moves must be a share in [0, 1], got {share!r}')
-        out['step_moves'] = share
     return out
 
 

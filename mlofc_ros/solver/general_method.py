@@ -122,8 +122,7 @@ class _Tracked(NamedTuple):
 def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
                   init_motions: Optional[Tuple[np.ndarray, np.ndarray]] = None,
                   rescan: Optional[np.ndarray] = None, step: bool = False,
-                  step_only: bool = False, step_moves: float = STEP_MOVES
-                  ) -> SegmentationResult:
+                  step_only: bool = False) -> SegmentationResult:
     """
     Solve ``problem`` with a rotation and a translation per body.
 
@@ -131,8 +130,8 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
     ``init_motions``: its motions ``(W (n, 3), T (n, 3))``, NaN rows unknown; ``rescan (n,)``
     bool: the tracked bodies to refit from the pivot starts too. ``step``: a tracking step
     (:func:`_step`); the tracked solve where it does not hold, or with ``step_only``
-    :class:`.StepNotTaken`; ``step_moves``: the step's guard (:func:`_step`). With fewer than
-    :data:`MODEL_FRAMES` frames the rotation-only step answers.
+    :class:`.StepNotTaken`. With fewer than :data:`MODEL_FRAMES` frames the rotation-only
+    step answers.
     """
     enough = problem.tracks.shape[1] >= MODEL_FRAMES
     warm = init_labels is not None and init_motions is not None
@@ -144,7 +143,7 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
         given = Diagnostics(principal_point=(cx, cy), aspect=fy / fx,
                             image_size=problem.image_size)
         stepped, motions = _step(obs, given, fx, init_labels, init_motions,
-                                 spatial_neighbours(obs.midpoints), rescan, step_moves)
+                                 spatial_neighbours(obs.midpoints), rescan)
         if stepped is not None:
             return stepped
         if step_only:
@@ -159,8 +158,7 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
     neighbours = spatial_neighbours(obs.midpoints)
     tracked = None
     if stepping and problem.intrinsics is None:     # the focal length from the solve above
-        stepped, motions = _step(obs, d, f, init_labels, init_motions, neighbours, rescan,
-                                 step_moves)
+        stepped, motions = _step(obs, d, f, init_labels, init_motions, neighbours, rescan)
         if stepped is not None:
             return stepped
         if step_only:
@@ -227,8 +225,7 @@ def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarr
 
 def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
           init_labels: np.ndarray, init_motions: Tuple[np.ndarray, np.ndarray],
-          neighbours: np.ndarray, rescan: Optional[np.ndarray] = None,
-          step_moves: float = STEP_MOVES
+          neighbours: np.ndarray, rescan: Optional[np.ndarray] = None
           ) -> Tuple[Optional[SegmentationResult], Optional[Tuple[np.ndarray, np.ndarray]]]:
     """
     Advance the previous window's bodies by one frame; the result (None: they no longer hold).
@@ -258,8 +255,8 @@ def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
     pipeline's schedule (:mod:`.warm`) asks for full solves. None (the caller runs the
     tracked solve) when no body has a motion or one without holds fewer than
     :data:`NEW_BODY_LINES` usable tracks, fewer than :data:`.general.WARM_INLIERS` of
-    the usable tracks stay inliers, or more than ``step_moves`` (:data:`STEP_MOVES`) of the
-    labelled tracks would change body.
+    the usable tracks stay inliers, or more than :data:`STEP_MOVES` of the labelled tracks
+    would change body.
     """
     w0, t0 = init_motions
     known = np.all(np.isfinite(w0), axis=1) & np.all(np.isfinite(t0), axis=1)
@@ -303,7 +300,7 @@ def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
     if not np.any(usable) or np.mean(labels[usable] >= 0) < WARM_INLIERS:
         return None, (W, T)
     held = usable & (prev >= 0) & (labels >= 0)
-    if np.count_nonzero(held & (labels != prev)) > step_moves * max(np.count_nonzero(held), 1):
+    if np.count_nonzero(held & (labels != prev)) > STEP_MOVES * max(np.count_nonzero(held), 1):
         return None, (W, T)
     sol = {'labels': labels, 'W': W, 'T': T, 'costs': costs, 'sigma2': NOISE_FACTOR * sigma2,
            'start': 'step', 'score': total_cost(total, labels, cap)}

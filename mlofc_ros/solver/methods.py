@@ -49,8 +49,8 @@ class WarmStart(enum.Enum):
 
 
 #: The optional keywords of :func:`.segment_lines` that only some methods accept.
-WARM_KEYWORDS = ('init_labels', 'init_motions', 'rescan', 'step', 'step_only', 'step_moves',
-                 'warm_inliers', 'warm_competes')
+WARM_KEYWORDS = ('init_labels', 'init_motions', 'rescan', 'step', 'step_only', 'warm_inliers',
+                 'warm_competes')
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,7 +187,7 @@ GENERAL = Method('general', solve_general,
                  'Ours with a translation per body too (K >= 3, :mod:`.general`).',
                  slow=True, warm_start=WarmStart.MOTIONS, rescans=True,
                  keywords=frozenset({'init_labels', 'init_motions', 'rescan', 'step',
-                                     'step_only', 'step_moves'}),
+                                     'step_only'}),
                  min_frames=GENERAL_MIN_FRAMES, stand_in=ROTATION_STEP, motion_parameters=6,
                  window=GENERAL_WINDOW)
 

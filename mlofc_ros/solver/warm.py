@@ -73,23 +73,6 @@ RESCAN_EVERY_MAX = 24
 RESCAN_SWITCH = 0.25
 RESCAN_SWITCH_FLOOR = 2e-3
 
-#: A lane's answer (a search or a full solve, tens of frames late) is of a window the stream
-#: has since left: its motions still hold, its labels do not. The first step from it labels
-#: every track afresh at its motions (``Pipeline._step_beside_lane``), and the ADOPTED_STEPS
-#: steps after it may move up to ADOPTED_STEP_MOVES of the labelled tracks to another body
-#: (:data:`.general_method.STEP_MOVES` otherwise): the labels and the motions settle
-#: together. Held to the usual guard from the second step on, a stale answer with a quarter of
-#: its lines wrong failed every step and the next full solve started from it again (own3+bg,
-#: render seed 3: 196 of 300 frames answered from the running fit, 26% wrong). bench lane x1,
-#: render seeds 0-11, mean wrong % own2+bg / own3+bg (worst), boxes within 5% of their
-#: omega: 3.6 / 9.7 (10.2 / 26.5), 23 of 24 / 26 of 36 -> 3.9 / 8.0 (9.3 / 14.9), 22 / 28.
-#: No guard at all on those steps gave the same figures; six such steps instead of three
-#: (seeds 0-5, no guard) 7.0 / 8.5 (29.7 / 15.4: a box lost for good); every track labelled
-#: afresh at each of the three steps' motions instead (no label prior: right labels
-#: drifted) 4.8 / 8.3 (15.8 / 16.0).
-ADOPTED_STEPS = 3
-ADOPTED_STEP_MOVES = 0.3
-
 #: A step whose measured noise (px) is above this multiple of the last full solve's asks for
 #: a full solve next: the tracked motions no longer explain the window.
 NOISE_JUMP = 2.0
@@ -135,7 +118,6 @@ class WarmStarts:
         self.rescans = 0                 # rescans done (whose turn is next)
         self._rescans_reset()
         self.rescan_out: Optional[Tuple[int, np.ndarray]] = None   # in a lane: (body, its w)
-        self.adopted_steps = 0           # steps still under ADOPTED_STEP_MOVES
 
     def _rescans_reset(self) -> None:
         """Rescan at the RESCAN_EVERY-th step from now, no back-off."""
@@ -175,22 +157,6 @@ class WarmStarts:
             out['warm_inliers'] = min(floor, WARM_INLIERS)
             self.floor = (floor, left - 1) if left > 1 else None
         return out
-
-    def answer_adopted(self) -> None:
-        """Note a lane's answer made the running fit: the next steps may trade more tracks."""
-        self.adopted_steps = ADOPTED_STEPS
-
-    def step_moves(self) -> Optional[float]:
-        """
-        Return the guard of the step about to be taken (None: the usual one); count it.
-
-        :data:`ADOPTED_STEP_MOVES` for the :data:`ADOPTED_STEPS` steps after the one from a
-        lane's answer.
-        """
-        if self.adopted_steps <= 0:
-            return None
-        self.adopted_steps -= 1
-        return ADOPTED_STEP_MOVES
 
     def rescan_aside(self, handed: bool) -> None:
         """
