@@ -512,6 +512,30 @@ def test_closed_form_smallest_eigenpair_matches_lapack_also_when_eigenvalues_mee
         assert np.all(res <= 1e-7 * top)
 
 
+def test_whitened_rows_whiten_the_normals_covariance_in_their_plane():
+    # each normal's two rows lie in the plane orthogonal to it, along the principal directions
+    # of its covariance there (smaller variance first), scaled to unit variance: LAPACK's
+    # eigenvectors up to sign; pair_components is orthonormal_pair components first
+    from mlofc_ros.solver.general.model import _whitened_rows
+    from mlofc_ros.solver.lines import pair_components
+    rng = np.random.default_rng(5)
+    m = rng.normal(size=(40, 6, 3))
+    m /= np.linalg.norm(m, axis=-1, keepdims=True)
+    A = rng.normal(size=(40, 6, 3, 3))
+    cov = A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(3)
+    cov[0, 0] = np.eye(3)                                # equal variances: any pair
+    rows = _whitened_rows(m, cov)
+    assert np.allclose(rows @ m[..., None], 0.0, atol=1e-12)
+    assert np.allclose(rows @ cov @ np.swapaxes(rows, -1, -2), np.eye(2), atol=1e-9)
+    E = orthonormal_pair(m)
+    val, vec = np.linalg.eigh(np.swapaxes(E, -1, -2) @ cov @ E)
+    ref = np.swapaxes(E @ vec, -1, -2) / np.sqrt(val)[..., None]
+    dots = np.abs(np.sum(rows * ref, axis=-1)) / np.sum(ref * ref, axis=-1)
+    assert np.allclose(dots.reshape(-1, 2)[1:], 1.0, atol=1e-9)
+    assert np.array_equal(pair_components(np.moveaxis(m, -1, 0)),
+                          np.moveaxis(E, (-2, -1), (0, 1)))
+
+
 def test_left_jacobian_is_the_derivative_of_a_rotated_vector():
     rng = np.random.default_rng(3)
     for phi in (rng.normal(size=3) * 0.6, np.array([1e-7, -2e-7, 0.0])):
