@@ -290,9 +290,9 @@ def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: Optional[float],
     ones per line, stacked entries first and lines last (:func:`_marginal_pass`). Fitted
     directions project the columns ``M = Av B`` out instead: ``An^T An - G^T S^+ G``
     (:func:`_column_projector`), as :func:`_line_eval` does from the constraints at twice
-    the cost: the two differ by up to
-    5e-6 relative on bench spinning's windows, 5e-4 on a near-perfect line of visp_cube
-    (a cost of 5e-6 px^2 from Gram entries of 3e6: the subtraction's rounding, 3e-9 px^2).
+    the cost: the two differ by up to 5e-6 relative on bench spinning's windows, 5e-4 on a
+    near-perfect line of visp_cube (a cost of 5e-6 px^2 from Gram entries of 3e6: the
+    subtraction's rounding, 3e-9 px^2).
     """
     base_c = np.ascontiguousarray(np.moveaxis(base, -1, 0))
     basis_c = (None if basis is None
