@@ -97,6 +97,19 @@ def test_warm_path_keeps_a_right_grouping_on_a_real_stream() -> None:
     assert max(rec['stream']) <= 0.03
 
 
+def test_stream_floor_knows_the_true_groups() -> None:
+    # the floor fits the true motions to the true groups: a few lines of 1R2TCR's 90 fit
+    # another motion better; shuffled groups fit no motion, and about half the lines go astray
+    from mlofc_tools.bench import hopkins_stream as hs
+    seq = hk.load_sequence(DATA / '1R2TCR.npz')
+    tracks, truth = hk.line_tracks(seq, hs.LINES_PER_MOTION, None, hs.MIN_LENGTH_PX, seed=1,
+                                   max_uses=hs.MAX_USES)
+    window = tracks[:, :10]
+    assert hs.floor(window, truth, seq.n_motions, seq.image_size, 1) <= 0.1
+    shuffled = np.random.default_rng(0).permutation(truth)
+    assert hs.floor(window, shuffled, seq.n_motions, seq.image_size, 1) >= 0.3
+
+
 def test_quick_stream_benchmark(tmp_path: pathlib.Path) -> None:
     from mlofc_tools.bench import hopkins_stream
     assert hopkins_stream.parse_args([]).motions is None

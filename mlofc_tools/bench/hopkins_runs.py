@@ -140,8 +140,8 @@ def checkerboard_motion(name: str) -> Optional[Dict[str, str]]:
             'translation': 'yes' if trans else 'no'}
 
 
-def _oracle(tracks: np.ndarray, labels: np.ndarray, n: int, size: Tuple[int, int], seed: int,
-            robust_at_f: bool = True) -> Dict[str, Dict[str, float]]:
+def oracle(tracks: np.ndarray, labels: np.ndarray, n: int, size: Tuple[int, int], seed: int,
+           robust_at_f: bool = True) -> Dict[str, Dict[str, float]]:
     """
     Compute oracle labels from the true grouping (see the module docstring).
 
@@ -191,8 +191,8 @@ def _oracle(tracks: np.ndarray, labels: np.ndarray, n: int, size: Tuple[int, int
     return out
 
 
-def _oracle_general(tracks: np.ndarray, labels: np.ndarray, n: int, focal: float,
-                    size: Tuple[int, int]) -> Dict[str, Dict[str, float]]:
+def oracle_general(tracks: np.ndarray, labels: np.ndarray, n: int, focal: float,
+                   size: Tuple[int, int]) -> Dict[str, Dict[str, float]]:
     """
     General-model oracles: each TRUE group fitted alone, every line to its cheapest body.
 
@@ -335,11 +335,11 @@ def run_unit(unit: Unit) -> List[Dict[str, object]]:
                                 unassigned=rec['unassigned'] if rec['failed'] else 0.0,
                                 seconds=math.nan, cpu=math.nan))
     try:
-        oracles = _oracle(tracks, labels, seq.n_motions, seq.image_size, unit.seed,
-                          'robust' in unit.methods)
+        oracles = oracle(tracks, labels, seq.n_motions, seq.image_size, unit.seed,
+                         'robust' in unit.methods)
         if 'general' in unit.methods and unit.k >= 3:
-            oracles.update(_oracle_general(tracks, labels, seq.n_motions,
-                                           oracles[ORACLE]['focal'], seq.image_size))
+            oracles.update(oracle_general(tracks, labels, seq.n_motions,
+                                          oracles[ORACLE]['focal'], seq.image_size))
         for name, vals in oracles.items():
             records.append(dict(dict(base, method=name, failed=0), **vals))
     except Exception as exc:  # noqa: B902

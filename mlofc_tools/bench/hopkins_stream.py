@@ -36,19 +36,22 @@ and refined from windows that share no frame (:class:`mlofc_ros.solver.focal.Foc
 Scored on the published labels of every full window (a line the solver leaves unassigned keeps
 its last body for ``label_memory`` frames, as the node publishes it; ``-1`` counts as wrong).
 Stamps are 30 frames/s (only the published rad/s depend on them). Reference on the same lines:
-the cold search (as `bench hopkins`, f unknown) at the middle and the last window. With
+the cold search (as `bench hopkins`, f unknown) at the middle and the last window, and the
+floor there (:func:`floor`: every line given to the cheapest of the true motions, each
+fitted to its true group by the general model). With
 ``--methods auto`` each stream starts rotation-only (``'robust'``) and moves to ``'general'``
 once the rotation model misfits it (:mod:`mlofc_ros.method_choice`).
 """
 import argparse
 import os
 import time
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 import zlib
 
 from mlofc_tools.bench import common
 from mlofc_tools.bench.hopkins_runs import (LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX,
-                                            n_motions_of, pick_sequences)
+                                            n_motions_of, ORACLE, oracle, ORACLE_G,
+                                            oracle_general, pick_sequences)
 from mlofc_tools.datasets import hopkins as hk
 from mlofc_tools.scoring import misclassification
 import numpy as np
@@ -101,11 +104,27 @@ def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
            'lines': int(len(truth)), 'stream': stream, 'window': size,
            'cpu_warm': float(np.median(cpu)) if cpu else float('nan')}
     last = frames - size
-    for key, start in (('cold_mid', last // 2), ('cold_last', last)) if cold else ():
-        res = segment_lines(tracks[:, start:start + size], n, intrinsics=None,
-                            image_size=seq.image_size, method='general', seed=s)
-        rec[key] = misclassification(res.labels, truth, n)
+    for key, start in (('mid', last // 2), ('last', last)) if cold else ():
+        window_tracks = tracks[:, start:start + size]
+        res = segment_lines(window_tracks, n, intrinsics=None, image_size=seq.image_size,
+                            method='general', seed=s)
+        rec['cold_' + key] = misclassification(res.labels, truth, n)
+        rec['floor_' + key] = floor(window_tracks, truth, n, seq.image_size, s)
     return rec
+
+
+def floor(tracks: np.ndarray, truth: np.ndarray, n: int, size: Tuple[int, int], seed: int
+          ) -> float:
+    """
+    Misclassification of the true motions: the floor of a window (``bench hopkins``'s).
+
+    ``tracks (N, K, 4)`` the window's line tracks, ``truth (N,)`` their groups in ``[0, n)``.
+    Every true group is fitted alone by the general model (rotation and translation,
+    marginalised line directions) at the oracle's focal length, and every line goes to its
+    cheapest body (``bench hopkins``'s ``oracle general (marginalised directions)``).
+    """
+    focal = oracle(tracks, truth, n, size, seed, robust_at_f=False)[ORACLE]['focal']
+    return oracle_general(tracks, truth, n, focal, size)[ORACLE_G]['miscl']
 
 
 def _unit(item) -> Dict[str, object]:
@@ -115,8 +134,9 @@ def _unit(item) -> Dict[str, object]:
 def summary_table(records: Sequence[Dict[str, object]]) -> str:
     """Markdown: mean (median) misclassification % per number of motions."""
     lines = ['| method | motions | sequences | every window | middle window | last window '
-             '| cold search, middle | cold search, last | CPU s per warm solve (median) |',
-             '|:--|--:|--:|--:|--:|--:|--:|--:|--:|']
+             '| cold search, middle | cold search, last | floor, middle | floor, last '
+             '| CPU s per warm solve (median) |',
+             '|:--|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|']
 
     def cell(v: List[float]) -> str:
         return f'{100 * np.mean(v):.1f} ({100 * np.median(v):.1f})' if v else '-'
@@ -125,11 +145,13 @@ def summary_table(records: Sequence[Dict[str, object]]) -> str:
         sel = [r for r in records if r['n'] == n and r['method'] == method]
         mid = [r['stream'][min((r['frames'] - r['window']) // 2, len(r['stream']) - 1)]
                for r in sel]
-        cold = {key: [r[key] for r in sel if key in r] for key in ('cold_mid', 'cold_last')}
+        ref = {key: [r[key] for r in sel if key in r]
+               for key in ('cold_mid', 'cold_last', 'floor_mid', 'floor_last')}
         lines.append(
             f'| {method} | {n} | {len(sel)} | {cell([np.mean(r["stream"]) for r in sel])} '
             f'| {cell(mid)} | {cell([r["stream"][-1] for r in sel])} '
-            f'| {cell(cold["cold_mid"])} | {cell(cold["cold_last"])} '
+            f'| {cell(ref["cold_mid"])} | {cell(ref["cold_last"])} '
+            f'| {cell(ref["floor_mid"])} | {cell(ref["floor_last"])} '
             f'| {np.median([r["cpu_warm"] for r in sel]):.2f} |')
     return '\n'.join(lines)
 
@@ -137,13 +159,14 @@ def summary_table(records: Sequence[Dict[str, object]]) -> str:
 def sequence_table(records: Sequence[Dict[str, object]]) -> str:
     """Markdown: per sequence, every window's mean % and the last, and the cold search's."""
     lines = ['| sequence | method | motions | frames | lines | every / last window '
-             '| cold: middle / last |', '|:--|:--|--:|--:|--:|--:|--:|']
+             '| cold: middle / last | floor: middle / last |',
+             '|:--|:--|--:|--:|--:|--:|--:|--:|']
     for r in sorted(records, key=lambda r: (r['name'], r['method'])):
-        cold = (f'{100 * r["cold_mid"]:.1f} / {100 * r["cold_last"]:.1f}'
-                if 'cold_mid' in r else '-')
+        cold, low = (f'{100 * r[a]:.1f} / {100 * r[b]:.1f}' if a in r else '-'
+                     for a, b in (('cold_mid', 'cold_last'), ('floor_mid', 'floor_last')))
         lines.append(f'| {r["name"]} | {r["method"]} | {r["n"]} | {r["frames"]} | {r["lines"]} '
                      f'| {100 * np.mean(r["stream"]):.1f} / {100 * r["stream"][-1]:.1f} '
-                     f'| {cold} |')
+                     f'| {cold} | {low} |')
     return '\n'.join(lines)
 
 
@@ -208,7 +231,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         '## Misclassification %, mean (median) over sequences', '', summary_table(records), '',
         "Every window: the mean over the sequence's windows (the first one cold). Middle and "
         'last: the window at the middle / end of the sequence, streamed, against the cold '
-        'search on the same lines and frames.', '',
+        'search and the floor (the true motions, each line to the cheapest) on the same lines '
+        'and frames.', '',
         '## Per sequence', '', sequence_table(records), ''])
     common.write_report('hopkins_stream', args.out, report)
     return 0
