@@ -972,13 +972,13 @@ class Pipeline:
         job, result = finished
         if job.rescan:
             # the body's motion, when the rescan moved it (its frame was answered by a step)
-            motions = None
+            motions, spreads = None, None
             if job.generation == self._generation:
                 if isinstance(result, SegmentationResult):
-                    motions = result_motions(result)
+                    motions, spreads = result_motions(result), result.basin_spreads
                 elif isinstance(result, StepNotTaken):
                     motions = result.motions
-            self._warm.rescan_returned(motions)
+            self._warm.rescan_returned(motions, spreads)
             return False
         if job.generation != self._generation:
             return False
@@ -1037,6 +1037,8 @@ class Pipeline:
         focal_log_sigma = (FOCAL_PRIOR_LOG_SIGMA if obs.intrinsics is None
                            else obs.focal_log_sigma)
         w_out[mapping] = published
+        # a body this solve did not rescan keeps the other minima its last rescan found
+        cov = cov + self._warm.carried_spreads(res, mapping) / interval ** 2
         c_out[mapping] = cov + focal_covariance(published, focal_log_sigma)
         v_out[mapping] = valid
         self._warm.remember(res, mapping, valid)

@@ -369,6 +369,37 @@ def test_warm_motions_follow_the_stable_ids_of_the_counted_bodies():
     assert np.array_equal(w[2], np.ones(3))
 
 
+def test_a_body_not_rescanned_keeps_the_other_minima_of_its_last_rescan():
+    def result(spreads, start):
+        n = len(spreads)
+        return SegmentationResult(
+            labels=np.zeros(4, dtype=np.int64), angular_velocities=np.zeros((n, 3)),
+            angular_covariances=np.tile(np.eye(3), (n, 1, 1)), focal_length=500.0,
+            residuals=np.zeros(4), costs=np.zeros((4, n)), method='general',
+            translation_directions=np.zeros((n, 3)), basin_spreads=np.asarray(spreads),
+            diagnostics=Diagnostics(start=start, sigma_px=1.0, translation_scales=np.ones(n)))
+    warm, S, none = WarmStarts(), np.diag([1.0, 2.0, 3.0]), np.full((3, 3), np.nan)
+    ids = np.array([5, 9])
+    warm.remember(result([S, none], 'warm'), ids, np.array([True, True]))
+    got = warm.carried_spreads(result([none, none], 'step'), ids)
+    assert np.array_equal(got[0], S) and np.all(got[1] == 0.0)
+    # a body rescanned in this solve has its own in the result's covariance already
+    assert np.all(warm.carried_spreads(result([2 * S, none], 'step'), ids) == 0.0)
+    # by stable id; a method without them (rotation-only) carries none
+    assert np.array_equal(warm.carried_spreads(result([none, none], 'step'), ids[::-1])[1], S)
+    rotation = replace(result([none, none], 'step'), basin_spreads=None)
+    assert np.all(warm.carried_spreads(rotation, ids) == 0.0)
+    # a search finds the bodies' minima afresh; a reset forgets them
+    warm.solved(get_method('general'), result([none, none], 'warm'))
+    assert 5 in warm.spreads
+    warm.solved(get_method('general'), result([none, none], 'spatial'))
+    assert not warm.spreads
+    warm.remember(result([S, S], 'warm'), ids, np.array([True, False]))
+    assert list(warm.spreads) == [5]
+    warm.reset()
+    assert not warm.spreads
+
+
 @pytest.mark.parametrize('method, seed', [('robust', 2), ('robust', 5), ('general', 0)])
 def test_bodies_are_found_and_retired_as_the_scene_changes(method, seed):
     """A box starts, one stops, one leaves: the count follows, ids as a user expects."""

@@ -741,6 +741,36 @@ def test_general_rescans_every_tracked_body_at_every_warm_solve(monkeypatch):
     assert any('init_labels' in kw for kw in asked)
 
 
+def test_a_body_publishes_the_other_minima_of_its_last_rescan_between_rescans(monkeypatch):
+    # a step rescans one body in turn; the others publish the other minima their last rescan
+    # found (WarmStarts.carried_spreads) on top of the step's own covariance
+    from mlofc_ros.solver.warm import WarmStarts
+    seq = small_sequence(16)
+    carried, published = [], []
+    real_carried, real_publish = WarmStarts.carried_spreads, Pipeline._publish
+
+    def carried_spy(self, res, ids):
+        out = real_carried(self, res, ids)
+        carried.append((np.array(ids), out))
+        return out
+
+    def publish_spy(self, obs, res, problems):
+        out = real_publish(self, obs, res, problems)
+        published.append((res, obs.frame_interval, out, carried[-1]))
+        return out
+    monkeypatch.setattr(WarmStarts, 'carried_spreads', carried_spy)
+    monkeypatch.setattr(Pipeline, '_publish', publish_spy)
+    p = Pipeline(num_bodies=2, window=3, method='general')
+    run(p, seq)
+    steps = [x for x in published if x[0].diagnostics.start == 'step']
+    assert steps and any(np.any(np.isnan(res.basin_spreads)) for res, _, _, _ in steps)
+    assert any(np.any(spread != 0.0) for _, _, _, (_, spread) in steps)
+    for res, dt, out, (ids, spread) in steps:
+        for j, stable in enumerate(ids):                    # the focal term comes on top
+            assert np.trace(out['angular_covariances'][stable]) >= (
+                np.trace(res.angular_covariances[j] + spread[j]) / dt ** 2) * (1 - 1e-9)
+
+
 def test_general_starts_once_the_window_holds_enough_frames(monkeypatch):
     # a cold 'general' search on 2-4 frames decides a grouping the warm starts keep: until the
     # window holds the method's min_frames (or all of a shorter window) its rotation-only step

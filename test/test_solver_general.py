@@ -13,7 +13,7 @@
 # limitations under the License.
 """The general (rotation + translation) line model of ``method='general'``."""
 from mlofc_ros.solver import segment_lines
-from mlofc_ros.solver.general import (body_covariance, fit_body, fit_body_multistart,
+from mlofc_ros.solver.general import (basin_spread, body_covariance, fit_body, fit_body_multistart,
                                       general_costs, general_warm, line_residuals,
                                       LineObservations, marginal_residuals,
                                       marginal_segmentation, necker_mirror,
@@ -749,3 +749,50 @@ def test_bodies_fitted_together_match_each_body_fitted_alone():
         alone = body_covariance(obs, members[b], W[b], T[b], 0.5, marginal=True)
         assert np.allclose(cov[b], alone, rtol=1e-7, atol=0)
     assert np.all(np.isinf(cov[2]))
+
+
+def test_other_minima_widen_the_covariance_by_how_likely_they_are():
+    w = np.array([0.0, 0.05, 0.0])
+    other = np.array([0.03, 0.02, 0.0])
+    dd = np.outer(other - w, other - w)
+    # runs in the kept basin, and two in one other basin: it counts once, at its cheapest
+    W = np.array([w * 1.01, other, other * 1.001, w])
+    # as cheap as the kept fit: as likely
+    assert np.allclose(basin_spread(W, [10.0, 10.0, 11.0, 10.0], w, 10.0, 1.0, 1.0), 0.5 * dd)
+    # dearer by 4 sigma2 over 2 frame pairs: weight e^-1 against 1
+    p = np.exp(-1.0) / (1.0 + np.exp(-1.0))
+    assert np.allclose(basin_spread(W, [10.0, 14.0, 15.0, 10.0], w, 10.0, 1.0, 2.0), p * dd)
+    # far dearer, or none at all: nothing added
+    assert np.allclose(basin_spread(W, [10.0, 1e4, 1e4, 10.0], w, 10.0, 1.0, 1.0), 0.0,
+                       atol=1e-15)
+    assert np.all(basin_spread(W[[0, 3]], [10.0, 10.0], w, 10.0, 1.0, 1.0) == 0.0)
+    # cheaper than the kept fit: more likely than it
+    assert np.trace(basin_spread(W, [10.0, 8.0, 9.0, 10.0], w, 10.0, 1.0, 1.0)) > np.trace(
+        0.5 * dd)
+    # a still body: minima apart by more than BASIN_FLOOR rad per frame
+    assert np.all(basin_spread([[0.001, 0.0, 0.0]], [1.0], np.zeros(3), 1.0, 1.0, 1.0) == 0.0)
+    assert np.trace(basin_spread([[0.01, 0.0, 0.0]], [1.0], np.zeros(3), 1.0, 1.0, 1.0)) > 0
+
+
+def test_a_rescan_reports_the_other_minima_in_the_covariance():
+    tracks, truth, W, motions = _two_spinning_bodies()
+    common = {'intrinsics': (F, F, C, C), 'method': 'general', 'init_labels': truth,
+              'init_motions': motions}
+    full = segment_lines(tracks[:, :10], 2, rescan=[0, 1], **common)
+    step = segment_lines(tracks[:, 1:], 2, step=True, rescan=[1], **common)
+    plain = segment_lines(tracks[:, 1:], 2, step=True, **common)
+    for res in (full, step):
+        assert res.diagnostics.start in ('warm', 'step')
+    assert np.all(np.isfinite(full.basin_spreads))
+    # a step reports the body it rescanned, NaN for the other (a stream carries its last)
+    assert np.all(np.isnan(step.basin_spreads[0]))
+    assert np.all(np.isfinite(step.basin_spreads[1]))
+    assert np.all(np.isnan(plain.basin_spreads))
+    for spread in (full.basin_spreads[0], full.basin_spreads[1], step.basin_spreads[1]):
+        assert np.allclose(spread, spread.T) and np.all(np.linalg.eigvalsh(spread) >= -1e-15)
+    # and the covariance includes it: the step without the rescan publishes the rest (the
+    # rescan's fit moved the body within its basin, a little)
+    assert np.allclose(step.angular_covariances[1] - step.basin_spreads[1],
+                       plain.angular_covariances[1], rtol=1e-3, atol=1e-15)
+    robust = segment_lines(tracks[:, :5], 2, intrinsics=(F, F, C, C))
+    assert robust.basin_spreads is None

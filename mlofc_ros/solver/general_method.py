@@ -30,7 +30,7 @@ from typing import Mapping, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from .general import (assign_bodies, assign_fitted, body_covariances, fit_bodies,
+from .general import (assign_bodies, assign_fitted, basin_spread, body_covariances, fit_bodies,
                       fit_bodies_multistart, fit_body, fit_body_multistart, general_search,
                       general_warm, LineObservations, marginal_segmentation, measured_noise,
                       NOISE_FACTOR, polish_bodies, rescale_translations, spatial_labels,
@@ -283,9 +283,10 @@ def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
     if moved:                       # every body's LM steps in one lockstep batch
         W[moved], T[moved], _ = fit_bodies(obs, [members[b] for b in moved], W[moved],
                                            T[moved], STEP_ITERATIONS, fine, fine)
+    spreads = np.full((n, 3, 3), np.nan)
     for b in moved:                                                  # bodies, not lines
         if rescan is not None and rescan[b]:
-            W[b], T[b] = _rescanned(obs, members[b], W[b], T[b], sigma2)
+            W[b], T[b], spreads[b] = _rescanned(obs, members[b], W[b], T[b], sigma2)
     fitted: list = []
     sigma2 = measured_noise(obs, W, T, fitted)
     # the labels at the segmentation's inflated noise level, where T's scale matters: the
@@ -303,25 +304,43 @@ def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,
     if np.count_nonzero(held & (labels != prev)) > STEP_MOVES * max(np.count_nonzero(held), 1):
         return None, (W, T)
     sol = {'labels': labels, 'W': W, 'T': T, 'costs': costs, 'sigma2': NOISE_FACTOR * sigma2,
-           'start': 'step', 'score': total_cost(total, labels, cap)}
+           'start': 'step', 'score': total_cost(total, labels, cap), 'spreads': spreads}
     return _result(obs, diagnostics, focal_length, sol, sigma2, 0, fitted[0]), (W, T)
 
 
 def _rescanned(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
-               sigma2: float) -> Tuple[np.ndarray, np.ndarray]:
+               sigma2: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Return a stepped body's motion, or the pivot search's when that fits its tracks better.
 
     As the full solve's rescan (:func:`_refit_bodies`): compared on the robust cost at the
-    measured noise ``sigma2``; the winner is refit at the published noise level.
+    measured noise ``sigma2``; the winner is refit at the published noise level. Returned
+    with the covariance term ``(3, 3)`` of the other minima the search ran into
+    (:func:`_spread`).
     """
     fine = sigma2 * PUBLISH_NOISE_SCALE
     here = fit_body(obs, idx, w, t, 0, sigma2, sigma2)[2]
+    runs: list = []
     alt = fit_body_multistart(obs, idx, w, t, RESCAN_ITERATIONS, 1, sigma2, obs.body_ray(idx),
-                              robust=sigma2, per_rate=True)
+                              robust=sigma2, per_rate=True, runs=runs)
+    W_runs = np.concatenate([runs[0][0], w[None]])
+    costs = np.concatenate([runs[0][1], [here]])
     if not alt[2] < (1.0 - RESCAN_MARGIN) * here:
-        return w, t
-    return fit_body(obs, idx, alt[0], alt[1], STEP_ITERATIONS, fine, fine)[:2]
+        return w, t, _spread(obs, idx, W_runs, costs, w, here, sigma2)
+    w_new, t_new = fit_body(obs, idx, alt[0], alt[1], STEP_ITERATIONS, fine, fine)[:2]
+    return w_new, t_new, _spread(obs, idx, W_runs, costs, alt[0], alt[2], sigma2)
+
+
+def _spread(obs: LineObservations, idx: np.ndarray, W_runs: np.ndarray, costs: np.ndarray,
+            w: np.ndarray, cost: float, sigma2: float) -> np.ndarray:
+    """
+    Return :func:`.general.basin_spread` of a rescanned body kept at ``w`` (cost ``cost``).
+
+    ``W_runs (R, 3)``, ``costs (R,)``: the rescan's runs and the fit it started from, at the
+    measured noise ``sigma2``; the tracks ``idx`` give the frame pairs (their median).
+    """
+    pairs = float(np.median(np.maximum(obs.frames[idx] - 1, 1)))
+    return basin_spread(W_runs, costs, w, cost, sigma2, pairs)
 
 
 def _search(obs: LineObservations, rot: SegmentationResult, init_labels: Optional[np.ndarray],
@@ -347,9 +366,11 @@ def _refit_bodies(obs: LineObservations, sol: dict, sigma2: float, rescan: np.nd
     window's motion, so a wrong basin -- a pivot, the depth reversal -- would stay window after
     window) is also refit from the full search's pivot starts, compared at the measured noise
     (the inflated one flattens the cost and often prefers a wrong basin), and keeps the
-    cheaper fit (:data:`RESCAN_MARGIN`).
+    cheaper fit (:data:`RESCAN_MARGIN`); ``sol['spreads'] (n, 3, 3)`` takes the covariance
+    term of the other minima it ran into (:func:`_spread`; NaN for the bodies not rescanned).
     """
     labels = sol['labels']
+    sol['spreads'] = np.full((sol['W'].shape[0], 3, 3), np.nan)
     members = [np.flatnonzero(labels == b) for b in range(sol['W'].shape[0])]
     some = [b for b, idx in enumerate(members) if idx.size >= 3]    # bodies, not lines
     if not some:
@@ -358,10 +379,18 @@ def _refit_bodies(obs: LineObservations, sol: dict, sigma2: float, rescan: np.nd
                                sol['T'][some], POLISH_ITERATIONS, sigma2, sigma2)
     again = [i for i, b in enumerate(some) if rescan[b]]
     if again:
+        runs: list = []
         alt = fit_bodies_multistart(obs, [members[some[i]] for i in again], W[again],
                                     T[again], POLISH_ITERATIONS, 1, sigma2, robust=sigma2,
-                                    per_rate=True)
+                                    per_rate=True, runs=runs)
         take = alt[2] < (1.0 - RESCAN_MARGIN) * cost[again]
+        for j, i in enumerate(again):                                # bodies, not lines
+            # the polished fit is one more run; the body keeps the cheaper of the two
+            W_runs = np.concatenate([runs[j][0], W[i][None]])
+            costs = np.concatenate([runs[j][1], [cost[i]]])
+            w, c = (alt[0][j], alt[2][j]) if take[j] else (W[i], cost[i])
+            sol['spreads'][some[i]] = _spread(obs, members[some[i]], W_runs, costs, w, c,
+                                              sigma2)
         keep = np.asarray(again)[take]
         W[keep], T[keep] = alt[0][take], alt[1][take]
     sol['W'][some], sol['T'][some] = W, T
@@ -379,6 +408,10 @@ def _result(obs: LineObservations, diagnostics: Diagnostics, focal_length: float
     """
     labels = sol['labels']
     W_pub, cov = _published(obs, labels, sol['W'], sol['T'], sigma2, iterations, fitted)
+    spreads = sol.get('spreads')
+    if spreads is not None:
+        # the other minima a rescan found widen the covariance towards them
+        cov = cov + np.nan_to_num(spreads, nan=0.0)
     dof = np.maximum(2.0 * obs.frames - 4.0, 0.0)
     scale = np.linalg.norm(sol['T'], axis=1)
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -392,7 +425,8 @@ def _result(obs: LineObservations, diagnostics: Diagnostics, focal_length: float
     return SegmentationResult(labels=labels, angular_velocities=W_pub, angular_covariances=cov,
                               focal_length=focal_length, residuals=rms, costs=sol['costs'],
                               method='general', segmentation_angular_velocities=sol['W'],
-                              translation_directions=directions, diagnostics=diagnostics)
+                              translation_directions=directions, basin_spreads=spreads,
+                              diagnostics=diagnostics)
 
 
 def _published(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,

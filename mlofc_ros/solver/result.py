@@ -137,6 +137,12 @@ class SegmentationResult:
     translation_directions : (n, 3) float64 or None
         Unit translation direction of every body (method 'general'; zero rows for bodies
         without a translation); None for the rotation-only methods.
+    basin_spreads : (n, 3, 3) float64 or None
+        Method 'general': the part of ``angular_covariances`` ((rad/frame)^2) that the other
+        minima of a body's cost add, for the bodies rescanned in this solve (zero when the
+        rescan found none); NaN for the bodies not rescanned, None for the other methods
+        (:func:`.general.basin_spread`). A stream carries a body's last one to the solves
+        that do not rescan it.
     diagnostics : Diagnostics
         How the result was found (noise level, starts, scores).
 
@@ -151,6 +157,7 @@ class SegmentationResult:
     method: str
     segmentation_angular_velocities: Optional[np.ndarray] = None
     translation_directions: Optional[np.ndarray] = None
+    basin_spreads: Optional[np.ndarray] = None
     diagnostics: Diagnostics = field(default_factory=Diagnostics)
 
     def __post_init__(self) -> None:

@@ -105,11 +105,15 @@ class WarmStarts:
 
     def __init__(self) -> None:
         self.motions: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}
+        #: per stable body id, the covariance term of the other minima its last rescan found
+        #: ((rad/frame)^2, :attr:`.SegmentationResult.basin_spreads`)
+        self.spreads: Dict[int, np.ndarray] = {}
         self.reset()
 
     def reset(self) -> None:
         """Forget everything (the body ids restart)."""
         self.motions.clear()
+        self.spreads.clear()
         self.floor: Optional[Tuple[float, int]] = None
         self.full_due = 0                # full solves still due after a search
         self.noise = math.inf            # the last full solve's noise (px)
@@ -185,13 +189,15 @@ class WarmStarts:
         self._rescanned = (body, np.array(W[body], dtype=float))
         return [body]
 
-    def rescan_returned(self, motions: Optional[Tuple[np.ndarray, np.ndarray]]) -> bool:
+    def rescan_returned(self, motions: Optional[Tuple[np.ndarray, np.ndarray]],
+                        spreads: Optional[np.ndarray] = None) -> bool:
         """
         Take a lane's answer to the rescan handed to it; return whether it changed the body.
 
         ``motions``: the motions ``(W, T) (n, 3)`` of the step that made it, on the window it
         was asked for; None when it failed or was dropped (asked for again at the next step).
-        As :meth:`_rescan_noted`.
+        As :meth:`_rescan_noted`. ``spreads``: its :attr:`.SegmentationResult.basin_spreads`,
+        if any: the rescanned body's is kept (:meth:`carried_spreads`).
         """
         out, self.rescan_out = self.rescan_out, None
         if out is None:
@@ -199,6 +205,8 @@ class WarmStarts:
         if motions is None:
             self.until_rescan = min(self.until_rescan, 0)
             return False
+        if spreads is not None and out[0] < len(spreads) and np.all(np.isfinite(spreads[out[0]])):
+            self.spreads[out[0]] = np.array(spreads[out[0]], dtype=float)
         return self._rescan_noted(out, *motions)
 
     def step_declined(self, motions: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> None:
@@ -243,6 +251,8 @@ class WarmStarts:
         ``interval``: the frame interval (s), to count the frames since a search.
         """
         start, noise = res.diagnostics.start, res.diagnostics.sigma_px
+        if start not in ('step', 'warm'):
+            self.spreads.clear()        # a search: the bodies' minima are found afresh
         if start == 'step':
             self.full_next = noise > NOISE_JUMP * self.noise
             self._rescan_done(res)
@@ -290,9 +300,35 @@ class WarmStarts:
         return switched
 
     def remember(self, res: SegmentationResult, ids: np.ndarray, valid: np.ndarray) -> None:
-        """Keep the motions of the valid bodies of ``res`` under their stable ``ids``."""
+        """
+        Keep the motions of the valid bodies of ``res`` under their stable ``ids``.
+
+        And the basin spreads of those it rescanned (:attr:`.SegmentationResult.basin_spreads`).
+        """
         if res.translation_directions is None:
             return
         W, T = result_motions(res)
+        spreads = res.basin_spreads
         for j in np.flatnonzero(valid):                  # bodies, not lines
             self.motions[int(ids[j])] = (W[j], T[j])
+            if spreads is not None and np.all(np.isfinite(spreads[j])):
+                self.spreads[int(ids[j])] = np.array(spreads[j], dtype=float)
+
+    def carried_spreads(self, res: SegmentationResult, ids: np.ndarray) -> np.ndarray:
+        """
+        Return the basin spreads ``(n, 3, 3)`` ((rad/frame)^2) ``res`` lacks, by stable ``ids``.
+
+        A body that this solve did not rescan (NaN in its
+        :attr:`.SegmentationResult.basin_spreads`) takes the one its last rescan found: the
+        other minima of a body's cost move little from one frame to the next, and the
+        rescans come round only every few steps (:data:`RESCAN_EVERY`). Zero for the bodies
+        this solve rescanned, those never rescanned, and every body of a method without them.
+        """
+        spreads = res.basin_spreads
+        out = np.zeros((len(ids), 3, 3))
+        if spreads is None:
+            return out
+        for j, stable in enumerate(ids):                 # bodies, not lines
+            if not np.all(np.isfinite(spreads[j])) and int(stable) in self.spreads:
+                out[j] = self.spreads[int(stable)]
+        return out

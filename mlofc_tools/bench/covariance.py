@@ -27,12 +27,15 @@ mean the covariance claims more than the estimate delivers (a filter fusing it w
 too much).
 
 Rows: ``general`` (each body's covariance scaled by its reduced chi-square when above 1,
-:func:`mlofc_ros.solver.general.body_covariance`) on every scene (the wide families: slow
+:func:`mlofc_ros.solver.general.body_covariance`, and widened towards the other minima its
+last rescan found, :func:`mlofc_ros.solver.general.basin_spread`) on every scene (the wide
+families: slow
 boxes, whose fitted minimum itself is biased, docs/design/general.md), and, as the reference,
 ``robust`` (rotation-only, what the default ``auto`` solves with until bodies translate) on
 the camera-centre scene where its model holds. Boxes
-are split by their omega error: a box fitted in a wrong basin (error > 5%) is a second
-minimum, which no local covariance covers. Last column: the share of all the boxes' frames
+are split by their omega error: a box fitted in a wrong basin (error > 5%) sits in a second
+minimum, which a local covariance does not cover; the other minima widen it only as far as
+they are likely. Last column: the share of all the boxes' frames
 whose NEES is above 900, a 30-sigma miss (issue #39 asks for none).
 """
 import argparse

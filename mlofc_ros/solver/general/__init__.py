@@ -26,7 +26,7 @@ only). The package's modules, in the order they build on each other:
   (:func:`general_warm`);
 - :mod:`.covariance`: the published rotation's covariance.
 """
-from .covariance import body_covariance, body_covariances
+from .covariance import basin_spread, body_covariance, body_covariances
 from .fit import (fit_bodies, fit_body, rescale_translation, rescale_translations, RESCALES,
                   ROBUST_SCALE, robust_scale)
 from .model import (general_costs, Intrinsics, line_residuals, LineObservations,
@@ -41,7 +41,7 @@ from .starts import (fit_bodies_multistart, fit_body_multistart, necker_mirror, 
                      pivot_picks, PIVOT_RATES, pivot_starts, PIVOT_W, polish_bodies,
                      polish_body, T_SCALES, T_STARTS)
 
-__all__ = ['assign_bodies', 'assign_fitted', 'body_covariance', 'body_covariances',
+__all__ = ['assign_bodies', 'assign_fitted', 'basin_spread', 'body_covariance', 'body_covariances',
            'fit_bodies', 'fit_bodies_multistart', 'fit_body', 'fit_body_multistart',
            'general_costs', 'general_search', 'general_warm', 'Intrinsics', 'line_residuals',
            'LineObservations', 'marginal_costs', 'marginal_residuals', 'marginal_segmentation',

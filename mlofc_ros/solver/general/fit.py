@@ -401,14 +401,15 @@ def best_fits(obs: LineObservations, members: Sequence[np.ndarray], W0: np.ndarr
 
 def best_of_starts(obs: LineObservations, members: Sequence[np.ndarray], W0: np.ndarray,
                    starts: Sequence[Tuple[np.ndarray, np.ndarray]], iterations: int,
-                   sigma2: Optional[float], robust: Optional[float] = None
-                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   sigma2: Optional[float], robust: Optional[float] = None,
+                   runs: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Run each body's LM from each of its starts; return the cheapest run's ``W, T (B, 3)``, costs.
 
     ``starts[b]``: body b's starting ``(W (S, 3), T (S, 3))``, to which T = 0 at ``W0[b]`` is
     added (:func:`_with_zero_start`); the first of a body's cheapest runs wins, as in
     :func:`_best_fit`. Every run of every body goes in one lockstep batch (:func:`fit_bodies`).
+    ``runs``: a list that receives each body's runs, ``(W (R, 3), costs (R,))``.
     """
     body, w_runs, t_runs = [], [], []
     for b, (ws, ts) in enumerate(starts):                # bodies, not lines
@@ -418,7 +419,10 @@ def best_of_starts(obs: LineObservations, members: Sequence[np.ndarray], W0: np.
         t_runs.append(ts)
     W, T, cost = fit_bodies(obs, [members[b] for b in body], np.concatenate(w_runs),
                             np.concatenate(t_runs), iterations, sigma2, robust)
-    best = _first_cheapest(np.asarray(body), cost, len(members))
+    body = np.asarray(body)
+    if runs is not None:
+        runs += [(W[body == b], cost[body == b]) for b in range(len(members))]
+    best = _first_cheapest(body, cost, len(members))
     return W[best], T[best], cost[best]
 
 
@@ -448,18 +452,22 @@ def _with_zero_start(w0: np.ndarray, W0: np.ndarray, starts: np.ndarray,
 
 def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np.ndarray,
               iterations: int, sigma2: Optional[float], w_starts: Optional[np.ndarray] = None,
-              robust: Optional[float] = None) -> Tuple[np.ndarray, np.ndarray, float]:
+              robust: Optional[float] = None, runs: Optional[list] = None
+              ) -> Tuple[np.ndarray, np.ndarray, float]:
     """
     Run :func:`fit_body` from ``w0`` and each T of ``starts (S, 3)``; the cheapest wins.
 
     ``w_starts (S, 3)``: a rotation per start instead of ``w0`` for all. With marginalised
     directions (``sigma2``) T = 0 (at ``w0``) is always one of the starts
-    (:func:`_with_zero_start`).
+    (:func:`_with_zero_start`). ``runs``: a list that receives every run, ``(W (S, 3),
+    costs (S,))``.
     """
     w0 = np.asarray(w0, dtype=float)
     W0 = np.broadcast_to(w0, starts.shape) if w_starts is None else w_starts
     W0, starts = _with_zero_start(w0, W0, starts, sigma2)
     W, T, cost = _lm_runs(obs, idx, W0, starts, iterations, sigma2, robust)  # in lockstep
+    if runs is not None:
+        runs.append((W, cost))
     best = 0
     for s in range(1, cost.size):                        # a few starts, not lines
         if cost[s] < cost[best]:

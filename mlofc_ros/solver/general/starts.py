@@ -105,8 +105,8 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
                         t0: Optional[np.ndarray] = None, iterations: int = 15,
                         keep: int = 3, sigma2: Optional[float] = None,
                         ray: Optional[np.ndarray] = None, pivots: bool = True,
-                        robust: Optional[float] = None, per_rate: bool = False
-                        ) -> Tuple[np.ndarray, np.ndarray, float]:
+                        robust: Optional[float] = None, per_rate: bool = False,
+                        runs: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray, float]:
     """
     Run :func:`.fit_body` from the ``keep`` best starts of a scan at ``w0``.
 
@@ -117,19 +117,27 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
     :data:`PIVOT_KEEP` best of :func:`pivot_starts` (when ``pivots``; with ``per_rate`` the
     best of each rate instead, :func:`pivot_picks`), and the winner's :func:`necker_mirror`
     is tried too. The cheapest run wins. ``robust`` (px^2): scans, fits and comparisons on
-    the robust cost at that noise level (:func:`.fit._lm_runs`).
+    the robust cost at that noise level (:func:`.fit._lm_runs`). ``runs``: a list that
+    receives every run's rotation and cost, ``(W (R, 3), costs (R,))``, the mirror's among
+    them (the other basins, :func:`.covariance.basin_spread`).
     """
     w_starts, starts = _multistart(obs, idx, w0, t0, keep, sigma2, ray, pivots, robust,
                                    per_rate)
-    fit = _best_fit(obs, idx, w0, starts, iterations, sigma2, w_starts, robust)
-    return fit if ray is None else _necker_check(obs, idx, fit, ray, iterations, sigma2, robust)
+    mine = None if runs is None else []
+    fit = _best_fit(obs, idx, w0, starts, iterations, sigma2, w_starts, robust, mine)
+    if ray is not None:
+        fit = _necker_check(obs, idx, fit, ray, iterations, sigma2, robust, mine)
+    if runs is not None:
+        runs.append(_joined(mine))
+    return fit
 
 
 def fit_bodies_multistart(obs: LineObservations, members: Sequence[np.ndarray],
                           W0: np.ndarray, T0: Optional[np.ndarray] = None,
                           iterations: int = 15, keep: int = 3,
                           sigma2: Optional[float] = None, pivots: bool = True,
-                          robust: Optional[float] = None, per_rate: bool = False
+                          robust: Optional[float] = None, per_rate: bool = False,
+                          runs: Optional[list] = None
                           ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Return :func:`fit_body_multistart` of several bodies: ``W, T (B, 3)`` and costs ``(B,)``.
@@ -137,14 +145,26 @@ def fit_bodies_multistart(obs: LineObservations, members: Sequence[np.ndarray],
     ``members``: each body's track indices (at least one); ``W0 (B, 3)``, ``T0 (B, 3)`` (or
     None) their starts; each body's ``ray`` is :meth:`.LineObservations.body_ray`. Every
     run of every body goes in one lockstep batch (:func:`.fit.fit_bodies`), then every
-    winner's mirror (:func:`polish_bodies`' check).
+    winner's mirror (:func:`polish_bodies`' check). ``runs``: a list that receives each
+    body's runs, as :func:`fit_body_multistart`'s.
     """
     W0 = np.asarray(W0, dtype=float)
     starts = [_multistart(obs, idx, W0[b], None if T0 is None else T0[b], keep, sigma2,
                           obs.body_ray(idx), pivots, robust, per_rate)
               for b, idx in enumerate(members)]                   # bodies, not lines
-    W, T, cost = best_of_starts(obs, members, W0, starts, iterations, sigma2, robust)
-    return _necker_checks(obs, members, W, T, cost, None, iterations, sigma2, robust)
+    parts = None if runs is None else []
+    W, T, cost = best_of_starts(obs, members, W0, starts, iterations, sigma2, robust, parts)
+    mirrors = None if runs is None else []
+    out = _necker_checks(obs, members, W, T, cost, None, iterations, sigma2, robust, mirrors)
+    if runs is not None:
+        runs += [_joined([a, b]) for a, b in zip(parts, mirrors)]  # bodies, not lines
+    return out
+
+
+def _joined(parts: Sequence[Tuple[np.ndarray, np.ndarray]]) -> Tuple[np.ndarray, np.ndarray]:
+    """Return runs ``(W (R, 3), costs (R,))`` given in parts as one."""
+    return (np.concatenate([np.reshape(w, (-1, 3)) for w, _ in parts]),
+            np.concatenate([np.ravel(c) for _, c in parts]))
 
 
 def _multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
@@ -197,11 +217,16 @@ def necker_mirror(w: np.ndarray, ray: np.ndarray) -> np.ndarray:
 
 def _necker_check(obs: LineObservations, idx: np.ndarray,
                   fit: Tuple[np.ndarray, np.ndarray, float], ray: np.ndarray, iterations: int,
-                  sigma2: Optional[float], robust: Optional[float] = None
-                  ) -> Tuple[np.ndarray, np.ndarray, float]:
-    """Return ``fit`` or the LM run from its :func:`necker_mirror`, whichever is cheaper."""
+                  sigma2: Optional[float], robust: Optional[float] = None,
+                  runs: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray, float]:
+    """
+    Return ``fit`` or the LM run from its :func:`necker_mirror`, whichever is cheaper.
+
+    ``runs``: a list that receives the mirror's run, ``(w (1, 3), cost (1,))``.
+    """
     W, T, cost = _necker_checks(obs, [idx], fit[0][None], fit[1][None], np.array([fit[2]]),
-                                np.asarray(ray, dtype=float)[None], iterations, sigma2, robust)
+                                np.asarray(ray, dtype=float)[None], iterations, sigma2, robust,
+                                runs)
     return W[0], T[0], float(cost[0])
 
 
@@ -237,13 +262,14 @@ def polish_bodies(obs: LineObservations, members: Sequence[np.ndarray], W: np.nd
 
 def _necker_checks(obs: LineObservations, members: Sequence[np.ndarray], W: np.ndarray,
                    T: np.ndarray, cost: np.ndarray, rays: Optional[np.ndarray],
-                   iterations: int, sigma2: Optional[float], robust: Optional[float] = None
-                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   iterations: int, sigma2: Optional[float], robust: Optional[float] = None,
+                   runs: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Return :func:`_necker_check` of several bodies' fits ``W, T (B, 3)``, costs ``(B,)``.
 
     ``rays (B, 3)``: the lines of sight; None: each body's :meth:`.LineObservations.body_ray`.
-    The mirrors' LM runs go in one lockstep batch.
+    The mirrors' LM runs go in one lockstep batch. ``runs``: a list that receives each
+    body's mirror run, ``(w (1, 3), cost (1,))``.
     """
     if rays is None:
         rays = np.array([obs.body_ray(idx) for idx in members])     # bodies, not lines
@@ -254,6 +280,8 @@ def _necker_checks(obs: LineObservations, members: Sequence[np.ndarray], W: np.n
         Tm = Tm * (np.linalg.norm(T, axis=1) / np.maximum(np.linalg.norm(Tm, axis=1),
                                                           1e-300))[:, None]
     Wm, Tm, cost_m = fit_bodies(obs, members, Wm, Tm, iterations, sigma2, robust)
+    if runs is not None:
+        runs += [(Wm[b][None], cost_m[b:b + 1]) for b in range(len(members))]
     better = cost_m < cost
     return (np.where(better[:, None], Wm, W), np.where(better[:, None], Tm, T),
             np.where(better, cost_m, cost))
