@@ -20,9 +20,9 @@ so that an under-fitted model cannot hide behind an inflated noise estimate), it
 as ``sqrt(pairs)`` times fewer pieces of evidence (a line's error persists over its frame
 pairs). The score adds ``log`` of that evidence per parameter of a body's motion (three for a
 rotation, six with a translation) and ``2 log n`` per track (its label), and the smallest
-score wins: a further body must explain more than it costs to describe. The online count
-(:mod:`mlofc_ros.counting`) also scores its changes under a label prior that knows bodies are
-compact in the image (:func:`label_cost` with the tracks' neighbours).
+score wins: a further body must explain more than it costs to describe. The online count (:mod:`mlofc_ros.counting`) also
+scores its changes under a label prior that knows bodies are compact in the image
+(:func:`label_cost` with the tracks' neighbours).
 """
 from dataclasses import replace
 from typing import Optional, Tuple
