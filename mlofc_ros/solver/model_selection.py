@@ -16,11 +16,10 @@ Choosing the number of bodies (``n_bodies=0``): a BIC-style score on truncated c
 
 For ``n = 1 .. n_max`` the method is run; every track costs its chi-square under its best body,
 capped at the outlier bound, all at ONE noise level (the one estimated with the richest model,
-so that an under-fitted model cannot hide behind an inflated noise estimate), its rows taken
-as ``sqrt(pairs)`` times fewer pieces of evidence (a line's error persists over its frame
-pairs). The score adds ``log`` of that evidence per parameter of a body's motion (three for a
-rotation, six with a translation) and ``2 log n`` per track (its label), and the smallest
-score wins: a further body must explain more than it costs to describe. The online count (:mod:`mlofc_ros.counting`) also
+so that an under-fitted model cannot hide behind an inflated noise estimate). The score adds
+``log(rows)`` per parameter of a body's motion (three for a rotation, six with a translation)
+and ``2 log n`` per track (its label), and the smallest score wins: a further body must
+explain more than it costs to describe. The online count (:mod:`mlofc_ros.counting`) also
 scores its changes under a label prior that knows bodies are compact in the image
 (:func:`label_cost` with the tracks' neighbours).
 """
@@ -162,11 +161,11 @@ def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray,
 
     ``RSS`` sums every track's cost capped at the outlier bound (at noise ``sigma``, or the
     model's own robust noise estimate when None); ``R`` rows, ``N`` usable tracks, ``pairs``
-    their mean frame pairs. A line tracked off stays off over its frames, so its ``2 pairs``
-    rows are not that many independent pieces of evidence. Counting all of them, one more
-    body was taken in 19 / 24% of single Hopkins155 windows given the true segmentation (2 /
-    3 motions, ``robust``); counting one pair per track, one less in 28 / 56%. ``E`` takes
-    the middle: one more in 2 / 3%, one less in 10 / 32% (docs/design/node.md). ``k`` the
+    their mean frame pairs: a line tracked off stays off over its frames, so its rows are not
+    ``2 pairs`` independent pieces of evidence; all of them counted, one more body was taken
+    in 19 / 24% of single Hopkins155 windows given the true segmentation (2 / 3 motions,
+    ``robust``), counted once per track, one less in 28 / 56%; ``E`` takes the middle (one
+    more 2 / 3%, one less 10 / 32%, docs/design/node.md); ``k`` the
     parameters of a body's motion (:attr:`.Method.motion_parameters` of ``res.method``: 3,
     6 for ``'general'``, whose bodies also translate); ``neighbours (N, k)``: the tracks'
     image neighbours (:func:`track_neighbours`), None for the uniform label prior.
