@@ -125,15 +125,15 @@ def test_a_change_of_count_must_win_under_both_label_priors():
         return replace(_result(labels, np.zeros((n, 3))), costs=costs,
                        diagnostics=Diagnostics(sigma_px=1.0))
     one = fitted(np.zeros(100, dtype=int), 1, 0.0)
-    split = fitted(halves, 2, 0.2)
-    # 800 rows of 4 frame pairs a track, 400 as evidence: 400 log(0.8) = -89 against 3 log 400
-    # = 18 parameters and a label term of 139 (uniform) or about 40 (compact halves)
+    split = fitted(halves, 2, 0.12)
+    # 800 rows: 800 log(0.88) = -102 against 3 log 800 = 20 parameters and a label term of
+    # 139 (uniform) or about 40 (compact halves)
     assert not scores_better(split, one, 1.0, dof, tracks)
     assert not scores_better(one, split, 1.0, dof, tracks)
     # each prior alone: the neighbours' takes the split, the uniform one keeps one body
     assert bic_score(split, 1.0, dof, near) < bic_score(one, 1.0, dof, near) - SCORE_MARGIN
     assert bic_score(one, 1.0, dof) < bic_score(split, 1.0, dof) - SCORE_MARGIN
-    clear = fitted(halves, 2, 0.4)
+    clear = fitted(halves, 2, 0.3)
     assert scores_better(clear, one, 1.0, dof, tracks)
     assert not scores_better(one, clear, 1.0, dof, tracks)
 

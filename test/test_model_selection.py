@@ -77,9 +77,8 @@ def test_a_body_that_translates_costs_six_parameters():
     labels = np.argmin(costs, axis=1)
     dof = np.full(30, 8.0)
     rotation = replace(_result(costs, labels), method='robust')
-    # the rows as evidence: 240 rows of 4 frame pairs a track count as 240 / sqrt(4)
     assert np.isclose(bic_score(_result(costs, labels), 1.0, dof) - bic_score(rotation, 1.0, dof),
-                      3 * 2 * np.log(dof.sum() / 2.0))
+                      3 * 2 * np.log(dof.sum()))
 
 
 def _tracks_at(points: np.ndarray) -> np.ndarray:

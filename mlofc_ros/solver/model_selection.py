@@ -152,7 +152,7 @@ def label_cost(labels: np.ndarray, n: int, usable: np.ndarray,
 def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray,
               neighbours: Optional[np.ndarray] = None) -> float:
     """
-    BIC of a segmentation: ``E log(RSS / R) + k n log E + L``, ``E = R / sqrt(pairs)``.
+    BIC of a segmentation: ``R log(RSS / R) + k n log R + L``.
 
     ``L`` is minus twice the log-likelihood of the labels (:func:`label_cost`; ``2 N log n``
     without ``neighbours``): with two frames a line has only two equations, and the freedom
@@ -160,12 +160,7 @@ def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray,
     about n.
 
     ``RSS`` sums every track's cost capped at the outlier bound (at noise ``sigma``, or the
-    model's own robust noise estimate when None); ``R`` rows, ``N`` usable tracks, ``pairs``
-    their mean frame pairs: a line tracked off stays off over its frames, so its rows are not
-    ``2 pairs`` independent pieces of evidence; all of them counted, one more body was taken
-    in 19 / 24% of single Hopkins155 windows given the true segmentation (2 / 3 motions,
-    ``robust``), counted once per track, one less in 28 / 56%; ``E`` takes the middle (one
-    more 2 / 3%, one less 10 / 32%, docs/design/node.md); ``k`` the
+    model's own robust noise estimate when None); ``R`` rows, ``N`` usable tracks; ``k`` the
     parameters of a body's motion (:attr:`.Method.motion_parameters` of ``res.method``: 3,
     6 for ``'general'``, whose bodies also translate); ``neighbours (N, k)``: the tracks'
     image neighbours (:func:`track_neighbours`), None for the uniform label prior.
@@ -178,10 +173,7 @@ def bic_score(res: SegmentationResult, sigma: Optional[float], dof: np.ndarray,
     best, cap = _capped_costs(res, sigma, dof)
     rss = float(np.sum(np.minimum(best, cap)))
     rows = float(np.sum(dof))
-    # a track's error persists over its frame pairs: its rows are not that many independent
-    # pieces of evidence
-    evidence = rows / np.sqrt(max(float(np.mean(dof[usable])) / 2.0, 1.0))
-    return (evidence * np.log(max(rss, 1e-300) / rows) + k * n * np.log(max(evidence, 2.0))
+    return (rows * np.log(max(rss, 1e-300) / rows) + k * n * np.log(max(rows, 2.0))
             + label_cost(res.labels, n, usable, neighbours))
 
 
