@@ -743,8 +743,12 @@ def test_general_rescans_every_tracked_body_at_every_warm_solve(monkeypatch):
 
 def test_a_body_publishes_the_other_minima_of_its_last_rescan_between_rescans(monkeypatch):
     # a step rescans one body in turn; the others publish the other minima their last rescan
-    # found (WarmStarts.carried_spreads) on top of the step's own covariance
+    # found (WarmStarts.carried_spreads) on top of the step's own covariance. Every rescan
+    # here finds a minimum 0.01 rad per frame off (whether this small scene has one depends on
+    # the platform's rounding)
+    from mlofc_ros.solver import general_method
     from mlofc_ros.solver.warm import WarmStarts
+    monkeypatch.setattr(general_method, 'basin_spread', lambda *a: 1e-4 * np.eye(3))
     seq = small_sequence(16)
     carried, published = [], []
     real_carried, real_publish = WarmStarts.carried_spreads, Pipeline._publish
