@@ -105,9 +105,9 @@ def test_stream_floor_knows_the_true_groups() -> None:
     tracks, truth = hk.line_tracks(seq, hs.LINES_PER_MOTION, None, hs.MIN_LENGTH_PX, seed=1,
                                    max_uses=hs.MAX_USES)
     window = tracks[:, :10]
-    assert hs.floor(window, truth, seq.n_motions, seq.image_size, 1) <= 0.1
+    assert hs.floor(window, truth, seq.n_motions, seq.image_size) <= 0.1
     shuffled = np.random.default_rng(0).permutation(truth)
-    assert hs.floor(window, shuffled, seq.n_motions, seq.image_size, 1) >= 0.3
+    assert hs.floor(window, shuffled, seq.n_motions, seq.image_size) >= 0.3
 
 
 def test_quick_stream_benchmark(tmp_path: pathlib.Path) -> None:

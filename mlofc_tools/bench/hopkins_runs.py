@@ -140,6 +140,21 @@ def checkerboard_motion(name: str) -> Optional[Dict[str, str]]:
             'translation': 'yes' if trans else 'no'}
 
 
+def oracle_focal(tracks: np.ndarray, labels: np.ndarray, n: int, size: Tuple[int, int]
+                 ) -> float:
+    """
+    Return the oracle's focal length (px), from the true grouping ``labels (N,)``.
+
+    The rotation-only profile cost's minimum, the principal point at the image centre of
+    ``size`` ``(w, h)``, searched within :data:`F_SPAN` of ``max(w, h)``.
+    """
+    from mlofc_ros.solver.focal import profile_cost, refine_focal
+
+    w, h = size
+    return refine_focal(profile_cost(tracks, labels, n, (w / 2.0, h / 2.0)), float(max(w, h)),
+                        span=F_SPAN)
+
+
 def oracle(tracks: np.ndarray, labels: np.ndarray, n: int, size: Tuple[int, int], seed: int,
            robust_at_f: bool = True) -> Dict[str, Dict[str, float]]:
     """
@@ -149,13 +164,11 @@ def oracle(tracks: np.ndarray, labels: np.ndarray, n: int, size: Tuple[int, int]
     the search gets wrong?).
     """
     from mlofc_ros.solver import assign_with_motions, segment_lines
-    from mlofc_ros.solver.focal import profile_cost, refine_focal
 
     t0, c0 = time.perf_counter(), time.process_time()
     w, h = size
-    centre = (w / 2.0, h / 2.0)
-    f = refine_focal(profile_cost(tracks, labels, n, centre), float(max(w, h)), span=F_SPAN)
-    intr = (f, f) + centre
+    f = oracle_focal(tracks, labels, n, size)
+    intr = (f, f, w / 2.0, h / 2.0)
     rot = np.zeros((n, 3))
     resid = np.full(tracks.shape[0], np.nan)
     for i in range(n):                                  # n <= 3 groups

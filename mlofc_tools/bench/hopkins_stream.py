@@ -50,7 +50,7 @@ import zlib
 
 from mlofc_tools.bench import common
 from mlofc_tools.bench.hopkins_runs import (LINES_PER_MOTION, MAX_USES, MIN_LENGTH_PX,
-                                            n_motions_of, ORACLE, oracle, ORACLE_G,
+                                            n_motions_of, oracle_focal, ORACLE_G,
                                             oracle_general, pick_sequences)
 from mlofc_tools.datasets import hopkins as hk
 from mlofc_tools.scoring import misclassification
@@ -109,12 +109,11 @@ def stream_sequence(path: str, seed: int = 155, windows: Optional[int] = None,
         res = segment_lines(window_tracks, n, intrinsics=None, image_size=seq.image_size,
                             method='general', seed=s)
         rec['cold_' + key] = misclassification(res.labels, truth, n)
-        rec['floor_' + key] = floor(window_tracks, truth, n, seq.image_size, s)
+        rec['floor_' + key] = floor(window_tracks, truth, n, seq.image_size)
     return rec
 
 
-def floor(tracks: np.ndarray, truth: np.ndarray, n: int, size: Tuple[int, int], seed: int
-          ) -> float:
+def floor(tracks: np.ndarray, truth: np.ndarray, n: int, size: Tuple[int, int]) -> float:
     """
     Misclassification of the true motions: the floor of a window (``bench hopkins``'s).
 
@@ -123,8 +122,8 @@ def floor(tracks: np.ndarray, truth: np.ndarray, n: int, size: Tuple[int, int], 
     marginalised line directions) at the oracle's focal length, and every line goes to its
     cheapest body (``bench hopkins``'s ``oracle general (marginalised directions)``).
     """
-    focal = oracle(tracks, truth, n, size, seed, robust_at_f=False)[ORACLE]['focal']
-    return oracle_general(tracks, truth, n, focal, size)[ORACLE_G]['miscl']
+    return oracle_general(tracks, truth, n, oracle_focal(tracks, truth, n, size),
+                          size)[ORACLE_G]['miscl']
 
 
 def _unit(item) -> Dict[str, object]:
