@@ -323,24 +323,26 @@ def _rescanned(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndar
     runs: list = []
     alt = fit_body_multistart(obs, idx, w, t, RESCAN_ITERATIONS, 1, sigma2, obs.body_ray(idx),
                               robust=sigma2, per_rate=True, runs=runs)
-    W_runs = np.concatenate([runs[0][0], w[None]])
-    costs = np.concatenate([runs[0][1], [here]])
     if not alt[2] < (1.0 - RESCAN_MARGIN) * here:
-        return w, t, _spread(obs, idx, W_runs, costs, w, here, sigma2)
+        return w, t, _spread(obs, idx, runs[0], (w, here), (w, here), sigma2)
     w_new, t_new = fit_body(obs, idx, alt[0], alt[1], STEP_ITERATIONS, fine, fine)[:2]
-    return w_new, t_new, _spread(obs, idx, W_runs, costs, alt[0], alt[2], sigma2)
+    return w_new, t_new, _spread(obs, idx, runs[0], (w, here), (alt[0], alt[2]), sigma2)
 
 
-def _spread(obs: LineObservations, idx: np.ndarray, W_runs: np.ndarray, costs: np.ndarray,
-            w: np.ndarray, cost: float, sigma2: float) -> np.ndarray:
+def _spread(obs: LineObservations, idx: np.ndarray, runs: Tuple[np.ndarray, np.ndarray],
+            start: Tuple[np.ndarray, float], kept: Tuple[np.ndarray, float], sigma2: float
+            ) -> np.ndarray:
     """
-    Return :func:`.general.basin_spread` of a rescanned body kept at ``w`` (cost ``cost``).
+    Return :func:`.general.basin_spread` of a rescanned body on the tracks ``idx``.
 
-    ``W_runs (R, 3)``, ``costs (R,)``: the rescan's runs and the fit it started from, at the
-    measured noise ``sigma2``; the tracks ``idx`` give the frame pairs (their median).
+    ``runs``: the rescan's ``(W (R, 3), costs (R,))``; ``start``: the fit it started from,
+    ``(w, cost)``, one more run; ``kept``: the fit the body keeps, ``(w, cost)``; all at the
+    measured noise ``sigma2``. The tracks give the frame pairs (their median).
     """
+    W_runs = np.concatenate([runs[0], np.asarray(start[0], dtype=float)[None]])
+    costs = np.concatenate([runs[1], [start[1]]])
     pairs = float(np.median(np.maximum(obs.frames[idx] - 1, 1)))
-    return basin_spread(W_runs, costs, w, cost, sigma2, pairs)
+    return basin_spread(W_runs, costs, kept[0], kept[1], sigma2, pairs)
 
 
 def _search(obs: LineObservations, rot: SegmentationResult, init_labels: Optional[np.ndarray],
@@ -386,11 +388,9 @@ def _refit_bodies(obs: LineObservations, sol: dict, sigma2: float, rescan: np.nd
         take = alt[2] < (1.0 - RESCAN_MARGIN) * cost[again]
         for j, i in enumerate(again):                                # bodies, not lines
             # the polished fit is one more run; the body keeps the cheaper of the two
-            W_runs = np.concatenate([runs[j][0], W[i][None]])
-            costs = np.concatenate([runs[j][1], [cost[i]]])
-            w, c = (alt[0][j], alt[2][j]) if take[j] else (W[i], cost[i])
-            sol['spreads'][some[i]] = _spread(obs, members[some[i]], W_runs, costs, w, c,
-                                              sigma2)
+            kept = (alt[0][j], alt[2][j]) if take[j] else (W[i], cost[i])
+            sol['spreads'][some[i]] = _spread(obs, members[some[i]], runs[j], (W[i], cost[i]),
+                                              kept, sigma2)
         keep = np.asarray(again)[take]
         W[keep], T[keep] = alt[0][take], alt[1][take]
     sol['W'][some], sol['T'][some] = W, T
