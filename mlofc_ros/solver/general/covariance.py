@@ -91,11 +91,16 @@ def body_covariances(obs: LineObservations, members: Sequence[np.ndarray], W: np
         with np.errstate(invalid='ignore', divide='ignore'):
             chi2 = np.where((dof > 0) & np.isfinite(total), total / dof / sigma2, 1.0)
         scale = np.maximum(chi2, 1.0)
-    for i, b in enumerate(some):                                      # bodies, not lines
-        try:
-            cov[b] = scale[i] * sigma2 * np.linalg.pinv(info[i], rcond=1e-10)[:3, :3]
-        except np.linalg.LinAlgError:
-            pass
+    try:
+        # every body in one call; where one's SVD fails, each on its own
+        cov[some] = (scale * sigma2)[:, None, None] * np.linalg.pinv(info, rcond=1e-10)[
+            :, :3, :3]
+    except np.linalg.LinAlgError:
+        for i, b in enumerate(some):                                  # bodies, not lines
+            try:
+                cov[b] = scale[i] * sigma2 * np.linalg.pinv(info[i], rcond=1e-10)[:3, :3]
+            except np.linalg.LinAlgError:
+                pass
     return cov
 
 

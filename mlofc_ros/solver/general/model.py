@@ -487,8 +487,16 @@ def _costs2(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
     ``products``: :func:`_row_products` of ``rows`` if already computed.
     """
     grams = _grams(_row_products(rows) if products is None else products, w, t, rows.shape[-3])
-    _, n0 = _marginal_costs(grams, base, sigma2, basis)
-    return _marginal_costs(grams, n0, sigma2, logdet_out=logdet_out)
+    # both passes components first (:func:`_marginal_pass`): the moments stay in its layout
+    base_c = np.ascontiguousarray(np.moveaxis(base, -1, 0))
+    basis_c = (None if basis is None
+               else np.ascontiguousarray(np.moveaxis(basis, (-2, -1), (0, 1))))
+    _, n0, _ = _marginal_pass(grams, base_c, sigma2, basis_c)
+    val, n0, logdet = _marginal_pass(grams, n0, sigma2)
+    if logdet is not None and logdet_out is not None:
+        logdet_out.append(logdet)
+    n0 = np.ascontiguousarray(np.moveaxis(n0, 0, -1))
+    return (val, n0) if logdet is None else (val + logdet, n0)
 
 
 def general_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray,
