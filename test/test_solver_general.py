@@ -90,27 +90,6 @@ def test_pivot_starts_and_the_necker_check_find_a_small_spinning_body():
     assert missed >= 2
 
 
-def test_the_mirror_of_a_bodys_own_motion_runs_in_the_same_batch_as_its_other_starts():
-    # a rescan or a polish from the depth-reversed twin of the true motion: the mirror of
-    # its own start is one more run of the first batch, and it wins
-    from mlofc_ros.solver.general.starts import _multistart
-    tracks, w = small_spinning_body(6)
-    obs = LineObservations(tracks, (F, F, C, C))
-    idx = np.arange(tracks.shape[0])
-    ray = obs.body_ray(idx)
-    twin = necker_mirror(w, ray)
-    t0 = ray - rotation_matrix(twin) @ ray                 # turning about the pivot
-    noise = 1e-3                                          # px^2: the tracks' own
-    W0, _, own = _multistart(obs, idx, twin, t0, 1, noise, ray, True, noise, True)
-    assert own == 2 and np.allclose(W0[1], w)             # the scan's start, then its mirror
-    assert W0.shape[0] == own + PIVOT_RATES.size          # the pivot starts after them
-    found, _, _ = fit_body_multistart(obs, idx, twin, t0, 10, 1, noise, ray, robust=noise,
-                                      per_rate=True)
-    assert np.linalg.norm(found - w) / np.linalg.norm(w) < 0.03
-    polished, _, _ = polish_body(obs, idx, twin, t0, 10, noise, noise)
-    assert np.linalg.norm(polished - w) / np.linalg.norm(w) < 0.03
-
-
 def test_pivot_picks_can_take_the_best_start_of_every_rate():
     # before any LM step the slow starts scan cheapest; per rate, the best start at each
     # rate is refined, where a fast body's true rate would otherwise never be tried

@@ -432,17 +432,14 @@ def best_fits(obs: LineObservations, members: Sequence[np.ndarray], W0: np.ndarr
 def best_of_starts(obs: LineObservations, members: Sequence[np.ndarray], W0: np.ndarray,
                    starts: Sequence[Tuple[np.ndarray, np.ndarray]], iterations: int,
                    sigma2: Optional[float], robust: Optional[float] = None,
-                   runs: Optional[list] = None, winners: Optional[list] = None
-                   ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   runs: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Run each body's LM from each of its starts; return the cheapest run's ``W, T (B, 3)``, costs.
 
     ``starts[b]``: body b's starting ``(W (S, 3), T (S, 3))``, to which T = 0 at ``W0[b]`` is
     added (:func:`_with_zero_start`); the first of a body's cheapest runs wins, as in
     :func:`_best_fit`. Every run of every body goes in one lockstep batch (:func:`fit_bodies`).
-    ``runs``: a list that receives each body's runs, ``(W (R, 3), costs (R,))``;
-    ``winners``: one that receives the index of each body's winning start ``(B,)`` (T = 0
-    last).
+    ``runs``: a list that receives each body's runs, ``(W (R, 3), costs (R,))``.
     """
     body, w_runs, t_runs = [], [], []
     for b, (ws, ts) in enumerate(starts):                # bodies, not lines
@@ -456,8 +453,6 @@ def best_of_starts(obs: LineObservations, members: Sequence[np.ndarray], W0: np.
     if runs is not None:
         runs += [(W[body == b], cost[body == b]) for b in range(len(members))]
     best = _first_cheapest(body, cost, len(members))
-    if winners is not None:
-        winners.append(best - np.searchsorted(body, np.arange(len(members))))
     return W[best], T[best], cost[best]
 
 
@@ -487,15 +482,15 @@ def _with_zero_start(w0: np.ndarray, W0: np.ndarray, starts: np.ndarray,
 
 def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np.ndarray,
               iterations: int, sigma2: Optional[float], w_starts: Optional[np.ndarray] = None,
-              robust: Optional[float] = None, runs: Optional[list] = None,
-              winner: Optional[list] = None) -> Tuple[np.ndarray, np.ndarray, float]:
+              robust: Optional[float] = None, runs: Optional[list] = None
+              ) -> Tuple[np.ndarray, np.ndarray, float]:
     """
     Run :func:`fit_body` from ``w0`` and each T of ``starts (S, 3)``; the cheapest wins.
 
     ``w_starts (S, 3)``: a rotation per start instead of ``w0`` for all. With marginalised
     directions (``sigma2``) T = 0 (at ``w0``) is always one of the starts
     (:func:`_with_zero_start`). ``runs``: a list that receives every run, ``(W (S, 3),
-    costs (S,))``; ``winner``: one that receives the index of the winning start (T = 0 last).
+    costs (S,))``.
     """
     w0 = np.asarray(w0, dtype=float)
     W0 = np.broadcast_to(w0, starts.shape) if w_starts is None else w_starts
@@ -507,6 +502,4 @@ def _best_fit(obs: LineObservations, idx: np.ndarray, w0: np.ndarray, starts: np
     for s in range(1, cost.size):                        # a few starts, not lines
         if cost[s] < cost[best]:
             best = s
-    if winner is not None:
-        winner.append(best)
     return W[best], T[best], float(cost[best])

@@ -16,11 +16,8 @@ Starting motions of a body's fit: scans over T, pivot starts and the Necker reve
 
 The cost is not convex in the motion: LM from one start often ends in a wrong basin. A body
 without a previous fit is therefore scanned over many starts (:func:`fit_body_multistart`),
-the best few refined in lockstep (:func:`.fit._best_fit`), and checked against the depth-reversed
-motion (:func:`necker_mirror`): the mirror of the start at the body's own motion is one more
-run of the same batch, and a winner from another start (a pivot) has its own mirror run after
-it: a rescan's function calls 52,500 -> 36,300 on bench step's scenes (polishing a body,
-whose only starts are its own motion and T = 0, still runs the winner's mirror after them).
+the best few refined in lockstep (:func:`.fit._best_fit`), and every winner is checked against
+its depth-reversed motion (:func:`necker_mirror`).
 """
 from typing import Optional, Sequence, Tuple
 
@@ -118,20 +115,17 @@ def fit_body_multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
     (else :data:`T_STARTS`) at every scale of :data:`T_SCALES`, ``t0`` itself and T = 0.
     With ``ray`` (unit, camera frame: towards the body's lines), also from the
     :data:`PIVOT_KEEP` best of :func:`pivot_starts` (when ``pivots``; with ``per_rate`` the
-    best of each rate instead, :func:`pivot_picks`), and from the :func:`necker_mirror` of the
-    start at ``w0`` (a pivot start that wins has its own mirror run after the batch). The
-    cheapest run wins. ``robust`` (px^2): scans, fits and comparisons on
+    best of each rate instead, :func:`pivot_picks`), and the winner's :func:`necker_mirror`
+    is tried too. The cheapest run wins. ``robust`` (px^2): scans, fits and comparisons on
     the robust cost at that noise level (:func:`.fit._lm_runs`). ``runs``: a list that
     receives every run's rotation and cost, ``(W (R, 3), costs (R,))``, the mirror's among
     them (the other basins, :func:`.covariance.basin_spread`).
     """
-    w_starts, starts, own = _multistart(obs, idx, w0, t0, keep, sigma2, ray, pivots, robust,
-                                        per_rate)
+    w_starts, starts = _multistart(obs, idx, w0, t0, keep, sigma2, ray, pivots, robust,
+                                   per_rate)
     mine = None if runs is None else []
-    won: list = []
-    fit = _best_fit(obs, idx, w0, starts, iterations, sigma2, w_starts, robust, mine, won)
-    if ray is not None and own <= won[0] < len(starts):
-        # a pivot start won: its mirror, which no start was
+    fit = _best_fit(obs, idx, w0, starts, iterations, sigma2, w_starts, robust, mine)
+    if ray is not None:
         fit = _necker_check(obs, idx, fit, ray, iterations, sigma2, robust, mine)
     if runs is not None:
         runs.append(_joined(mine))
@@ -150,30 +144,21 @@ def fit_bodies_multistart(obs: LineObservations, members: Sequence[np.ndarray],
 
     ``members``: each body's track indices (at least one); ``W0 (B, 3)``, ``T0 (B, 3)`` (or
     None) their starts; each body's ``ray`` is :meth:`.LineObservations.body_ray`. Every
-    run of every body goes in one lockstep batch (:func:`.fit.fit_bodies`), then the mirror
-    of every winner from a pivot start. ``runs``: a list that receives each body's runs, as
-    :func:`fit_body_multistart`'s.
+    run of every body goes in one lockstep batch (:func:`.fit.fit_bodies`), then every
+    winner's mirror (:func:`polish_bodies`' check). ``runs``: a list that receives each
+    body's runs, as :func:`fit_body_multistart`'s.
     """
     W0 = np.asarray(W0, dtype=float)
     starts = [_multistart(obs, idx, W0[b], None if T0 is None else T0[b], keep, sigma2,
                           obs.body_ray(idx), pivots, robust, per_rate)
               for b, idx in enumerate(members)]                   # bodies, not lines
     parts = None if runs is None else []
-    won: list = []
-    W, T, cost = best_of_starts(obs, members, W0, [s[:2] for s in starts], iterations, sigma2,
-                                robust, parts, won)
-    # bodies whose winner is a pivot start: its mirror, which no start was
-    check = [b for b, (_, ts, own) in enumerate(starts) if own <= won[0][b] < len(ts)]
-    mirrors: list = []
-    if check:
-        W[check], T[check], cost[check] = _necker_checks(
-            obs, [members[b] for b in check], W[check], T[check], cost[check], None,
-            iterations, sigma2, robust, mirrors)
+    W, T, cost = best_of_starts(obs, members, W0, starts, iterations, sigma2, robust, parts)
+    mirrors = None if runs is None else []
+    out = _necker_checks(obs, members, W, T, cost, None, iterations, sigma2, robust, mirrors)
     if runs is not None:
-        more = dict(zip(check, mirrors))
-        runs += [_joined([part] + ([more[b]] if b in more else []))
-                 for b, part in enumerate(parts)]                  # bodies, not lines
-    return W, T, cost
+        runs += [_joined([a, b]) for a, b in zip(parts, mirrors)]  # bodies, not lines
+    return out
 
 
 def _joined(parts: Sequence[Tuple[np.ndarray, np.ndarray]]) -> Tuple[np.ndarray, np.ndarray]:
@@ -185,15 +170,8 @@ def _joined(parts: Sequence[Tuple[np.ndarray, np.ndarray]]) -> Tuple[np.ndarray,
 def _multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
                 t0: Optional[np.ndarray], keep: int, sigma2: Optional[float],
                 ray: Optional[np.ndarray], pivots: bool, robust: Optional[float],
-                per_rate: bool) -> Tuple[np.ndarray, np.ndarray, int]:
-    """
-    Return :func:`fit_body_multistart`'s starts ``W, T (S, 3)`` of the tracks ``idx``.
-
-    Also returned: how many of them come before the pivot starts: the scan's at ``w0`` and,
-    with ``ray``, the :func:`necker_mirror` of the first of them (one more run in the same
-    lockstep batch, instead of a second batch from the winner's mirror when a start at
-    ``w0`` wins).
-    """
+                per_rate: bool) -> Tuple[np.ndarray, np.ndarray]:
+    """Return :func:`fit_body_multistart`'s starts ``W, T (S, 3)`` of the tracks ``idx``."""
     rows, base = obs.rows[idx], obs.m_first[idx]
     scale = None if robust is None else robust_scale(obs.frames[idx], robust)
     products = obs.row_products(idx)
@@ -215,17 +193,12 @@ def _multistart(obs: LineObservations, idx: np.ndarray, w0: np.ndarray,
                            products)
         starts = cands[np.argsort(scan)[:keep]]
     w_starts = np.broadcast_to(np.asarray(w0, dtype=float), starts.shape)
-    if ray is not None:
-        ray = np.asarray(ray, dtype=float)
-        wm, tm = _mirrors(w_starts[:1], starts[:1], ray[None], sigma2)
-        w_starts, starts = np.concatenate([w_starts, wm]), np.concatenate([starts, tm])
-    own = starts.shape[0]
     if ray is not None and pivots:
         pw, pt = pivot_starts(np.asarray(ray, dtype=float))
         best = pivot_picks(_scan_costs(rows, base, pw, pt, sigma2, scale, products), per_rate)
         w_starts = np.concatenate([w_starts, pw[best]])
         starts = np.concatenate([starts, pt[best]])
-    return w_starts, starts, own
+    return w_starts, starts
 
 
 def necker_mirror(w: np.ndarray, ray: np.ndarray) -> np.ndarray:
@@ -287,23 +260,6 @@ def polish_bodies(obs: LineObservations, members: Sequence[np.ndarray], W: np.nd
     return _necker_checks(obs, members, W, T, cost, None, iterations, sigma2, robust)
 
 
-def _mirrors(W: np.ndarray, T: np.ndarray, rays: np.ndarray, sigma2: Optional[float]
-             ) -> Tuple[np.ndarray, np.ndarray]:
-    """
-    Return the :func:`necker_mirror` motions ``(W, T) (B, 3)`` of ``W, T (B, 3)``.
-
-    ``rays (B, 3)``: the unit lines of sight. The mirror turns about the pivot on its ray
-    (:func:`_pivot_translation`); with fitted directions (``sigma2`` None) T keeps the
-    length of ``T``.
-    """
-    Wm = 2.0 * np.sum(W * rays, axis=1, keepdims=True) * rays - W
-    Tm = rays - (rotation_matrix(Wm) @ rays[:, :, None])[:, :, 0]
-    if sigma2 is None:
-        Tm = Tm * (np.linalg.norm(T, axis=1) / np.maximum(np.linalg.norm(Tm, axis=1),
-                                                          1e-300))[:, None]
-    return Wm, Tm
-
-
 def _necker_checks(obs: LineObservations, members: Sequence[np.ndarray], W: np.ndarray,
                    T: np.ndarray, cost: np.ndarray, rays: Optional[np.ndarray],
                    iterations: int, sigma2: Optional[float], robust: Optional[float] = None,
@@ -317,7 +273,12 @@ def _necker_checks(obs: LineObservations, members: Sequence[np.ndarray], W: np.n
     """
     if rays is None:
         rays = np.array([obs.body_ray(idx) for idx in members])     # bodies, not lines
-    Wm, Tm = _mirrors(W, T, rays, sigma2)
+    Wm = 2.0 * np.sum(W * rays, axis=1, keepdims=True) * rays - W     # necker_mirror
+    # the mirror turns about the pivot too (:func:`_pivot_translation`, one per body)
+    Tm = rays - (rotation_matrix(Wm) @ rays[:, :, None])[:, :, 0]
+    if sigma2 is None:
+        Tm = Tm * (np.linalg.norm(T, axis=1) / np.maximum(np.linalg.norm(Tm, axis=1),
+                                                          1e-300))[:, None]
     Wm, Tm, cost_m = fit_bodies(obs, members, Wm, Tm, iterations, sigma2, robust)
     if runs is not None:
         runs += [(Wm[b][None], cost_m[b:b + 1]) for b in range(len(members))]
