@@ -144,9 +144,10 @@ def rescale_translations(obs: LineObservations, members: Sequence[np.ndarray], W
     Return each body's ``T (B, 3)`` at the scale of :data:`RESCALES` that fits it best.
 
     ``members``: each body's track indices (non-empty); ``W, T (B, 3)``: the bodies'
-    motions, W held; ``sigma2`` as in :func:`rescale_translation`. Every body and scale in
-    one batched cost evaluation (the bodies' tracks padded, :func:`padded_members`), or a
-    few when the batch would exceed 4 :data:`_BATCH`.
+    motions, W held; ``sigma2`` as in :func:`rescale_translation`. Every body in two batched
+    cost evaluations, the coarse scales and then the half steps beside each body's cheapest
+    (the bodies' tracks padded, :func:`padded_members`), or a few more when a batch would
+    exceed 4 :data:`_BATCH`.
     """
     idx, mask = padded_members(members)
     W, T = np.asarray(W, dtype=float), np.asarray(T, dtype=float)

@@ -274,13 +274,15 @@ def _grams(products: np.ndarray, w: np.ndarray, t: np.ndarray, n_frames: int) ->
 
 
 def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: Optional[float],
-                    basis: Optional[np.ndarray] = None, logdet_out: Optional[list] = None
-                    ) -> Tuple[np.ndarray, np.ndarray]:
+                    basis: Optional[np.ndarray] = None, logdet_out: Optional[list] = None,
+                    passes: int = 1) -> Tuple[np.ndarray, np.ndarray]:
     """
     Return :func:`marginal_residuals`' costs ``(..., L)`` and moments ``(..., L, 3)``.
 
     From the :data:`Grams` ``grams``; ``sigma2`` None: :func:`line_residuals`' (fitted
-    directions).
+    directions). ``passes``: each pass after the first takes the plane of ``v0`` orthogonal
+    to the moments of the one before (the moments stay components first between them);
+    ``logdet_out`` receives the last pass's log-determinant.
 
     With the whitened direction columns ``M = Av B / sqrt(sigma2)`` (``B`` the basis of the
     plane orthogonal to ``base``, :func:`.orthonormal_pair` or ``basis``) and ``S = M^T M``
@@ -298,6 +300,8 @@ def _marginal_costs(grams: Grams, base: np.ndarray, sigma2: Optional[float],
     basis_c = (None if basis is None
                else np.ascontiguousarray(np.moveaxis(basis, (-2, -1), (0, 1))))
     val, n0, logdet = _marginal_pass(grams, base_c, sigma2, basis_c)
+    for _ in range(passes - 1):
+        val, n0, logdet = _marginal_pass(grams, n0, sigma2)
     if logdet is not None and logdet_out is not None:
         logdet_out.append(logdet)
     n0 = np.ascontiguousarray(np.moveaxis(n0, 0, -1))
@@ -487,16 +491,7 @@ def _costs2(rows: np.ndarray, base: np.ndarray, w: np.ndarray, t: np.ndarray,
     ``products``: :func:`_row_products` of ``rows`` if already computed.
     """
     grams = _grams(_row_products(rows) if products is None else products, w, t, rows.shape[-3])
-    # both passes components first (:func:`_marginal_pass`): the moments stay in its layout
-    base_c = np.ascontiguousarray(np.moveaxis(base, -1, 0))
-    basis_c = (None if basis is None
-               else np.ascontiguousarray(np.moveaxis(basis, (-2, -1), (0, 1))))
-    _, n0, _ = _marginal_pass(grams, base_c, sigma2, basis_c)
-    val, n0, logdet = _marginal_pass(grams, n0, sigma2)
-    if logdet is not None and logdet_out is not None:
-        logdet_out.append(logdet)
-    n0 = np.ascontiguousarray(np.moveaxis(n0, 0, -1))
-    return (val, n0) if logdet is None else (val + logdet, n0)
+    return _marginal_costs(grams, base, sigma2, basis, logdet_out, passes=2)
 
 
 def general_costs(obs: LineObservations, W: np.ndarray, T: np.ndarray,
