@@ -155,33 +155,38 @@ def rescale_translations(obs: LineObservations, members: Sequence[np.ndarray], W
     out = np.empty_like(T)
     for s in range(0, idx.shape[0], size):               # chunks of bodies, not lines
         part = slice(s, s + size)
-        rows = np.arange(T[part].shape[0])
-        coarse = _scale_totals(obs, idx[part], mask[part], W[part], T[part],
-                               np.broadcast_to(_COARSE, (rows.size, _COARSE.size)), sigma2)
+        # the chunk's tracks gathered once for both batches
+        tracks = (obs.rows[idx[part]], obs.m_first[idx[part]][:, None],
+                  obs.row_products(idx[part])[:, None], mask[part])
+        body = np.arange(T[part].shape[0])
+        coarse = _scale_totals(tracks, W[part], T[part],
+                               np.broadcast_to(_COARSE, (body.size, _COARSE.size)), sigma2)
         first = np.argmin(coarse, axis=1)
         best = _COARSE[first]
         # the half steps beside the coarse winner, within the range (T = 0 stays)
         near = np.clip(best[:, None] * np.sqrt(2.0) ** np.array([-1.0, 1.0]),
                        RESCALES[1], RESCALES[-1]) * (best[:, None] > 0)
-        fine = _scale_totals(obs, idx[part], mask[part], W[part], T[part], near, sigma2)
+        fine = _scale_totals(tracks, W[part], T[part], near, sigma2)
         scales = np.concatenate([best[:, None], near], axis=1)
-        pick = np.argmin(np.concatenate([coarse[rows, first][:, None], fine], axis=1), axis=1)
-        out[part] = T[part] * scales[rows, pick][:, None]
+        pick = np.argmin(np.concatenate([coarse[body, first][:, None], fine], axis=1), axis=1)
+        out[part] = T[part] * scales[body, pick][:, None]
     return out
 
 
-def _scale_totals(obs: LineObservations, idx: np.ndarray, mask: np.ndarray, W: np.ndarray,
-                  T: np.ndarray, scales: np.ndarray, sigma2: float) -> np.ndarray:
+def _scale_totals(tracks: Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                  W: np.ndarray, T: np.ndarray, scales: np.ndarray, sigma2: float
+                  ) -> np.ndarray:
     """
     Return the marginalised cost ``(B, R)`` of each body's tracks at ``T`` times each scale.
 
-    ``idx, mask (B, L)``: the bodies' padded tracks (:func:`padded_members`); ``W, T (B, 3)``;
-    ``scales (B, R)``; ``sigma2`` (px^2) the noise variance.
+    ``tracks``: the bodies' padded tracks (:func:`padded_members`) as their observation rows
+    ``(B, L, K, 2, 3)``, first normals ``(B, 1, L, 3)``, row products ``(B, 1, 9K, L)`` and
+    mask ``(B, L)``; ``W, T (B, 3)``; ``scales (B, R)``; ``sigma2`` (px^2) the noise variance.
     """
+    rows, base, products, mask = tracks
     cands = T[:, None, :] * scales[:, :, None]                               # (B, R, 3)
     w = np.broadcast_to(W[:, None, :], cands.shape)
-    res, _ = _costs2(obs.rows[idx], obs.m_first[idx][:, None], w, cands, sigma2,
-                     products=obs.row_products(idx)[:, None])               # (B, R, L)
+    res, _ = _costs2(rows, base, w, cands, sigma2, products=products)       # (B, R, L)
     return np.where(mask[:, None] > 0, res, 0.0).sum(axis=-1)
 
 
@@ -279,10 +284,10 @@ def _lm_runs(obs: LineObservations, idx: np.ndarray, W0: np.ndarray, T0: np.ndar
     return W, T, np.array(runs.cost)
 
 
-def _moved(t: np.ndarray, x: np.ndarray, basis: np.ndarray, free: bool) -> np.ndarray:
-    """Return the translation ``t`` moved by the parameters ``x[3:]`` along ``basis``."""
+def _moved(t: np.ndarray, x: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """Return the unit translation ``t`` moved by the parameters ``x[3:]`` along ``basis``."""
     tt = t + x[3:] @ basis
-    return tt if free else tt / np.linalg.norm(tt)
+    return tt / np.linalg.norm(tt)
 
 
 def _normal_equations(tracks: _Tracks, W: np.ndarray, T: np.ndarray, n0: np.ndarray,
@@ -339,7 +344,7 @@ def _line_search(tracks: _Tracks, runs: _Runs, active: np.ndarray, systems: list
         if tracks.free:
             ct = T[pos] + steps[:, 3:]
         else:
-            ct = np.array([_moved(T[a], step, bases[a], False) for a, step, _ in cand])
+            ct = np.array([_moved(T[a], step, bases[a]) for a, step, _ in cand])
         mine = tracks.of(active[pos])
         rn, n0n = _totals(mine.rows, n0[pos], cw, ct, mine.sigma2, mine.scale, basis[pos],
                           mine.products)
