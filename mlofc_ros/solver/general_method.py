@@ -438,14 +438,30 @@ def _published(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.n
     Each body's refit (:func:`published_motions`); a body whose refit has no finite covariance
     publishes the segmentation's motion ``W`` (nor would it decide, through the pipeline's
     validity, which bodies are tracked). ``fitted (N, n)``: the fitted-direction costs at
-    ``(W, T)`` if known (used for the bodies that are not refit).
+    ``(W, T)`` if known (used for the bodies that are not refit). ``iterations`` 0: ``W, T``
+    are a step's, fitted at the published noise level already.
+
+    Each covariance is the information of the cost its motion minimises (at
+    :data:`PUBLISH_NOISE_SCALE` of ``sigma2`` for a refit or a step; at ``sigma2`` for a body
+    that keeps the segmentation's motion) at the noise ``sigma2``
+    (:func:`.general.body_covariances`, ``fitted_at``).
     """
     W_pub, T_pub = published_motions(obs, labels, W, T, sigma2, iterations)
-    members = [np.flatnonzero(labels == b) for b in range(W.shape[0])]   # bodies, not lines
+    n = W.shape[0]
+    members = [np.flatnonzero(labels == b) for b in range(n)]          # bodies, not lines
     same = np.all(W_pub == W, axis=1) & np.all(T_pub == T, axis=1)
     known = ([fitted[idx, b] for b, idx in enumerate(members)]
              if fitted is not None and np.all(same) else None)
-    cov = body_covariances(obs, members, W_pub, T_pub, sigma2, marginal=True, fitted=known)
+    fine = (np.ones(n, dtype=bool) if iterations == 0 and PUBLISH_NOISE_SCALE is not None
+            else ~same)
+    cov = np.full((n, 3, 3), np.inf)
+    for at_fine in (True, False):
+        some = np.flatnonzero(fine == at_fine)
+        if some.size:
+            cov[some] = body_covariances(
+                obs, [members[b] for b in some], W_pub[some], T_pub[some], sigma2,
+                marginal=True, fitted=None if known is None else [known[b] for b in some],
+                fitted_at=sigma2 * PUBLISH_NOISE_SCALE if at_fine else None)
     back = [b for b in range(W.shape[0])
             if not np.all(np.isfinite(cov[b])) and not np.array_equal(W_pub[b], W[b])]
     if back:

@@ -14,11 +14,22 @@
 """
 Covariance of a 'general' body's rotation vector, published with its angular velocity.
 
+The information is that of the cost the published motion minimises (at a fraction of the
+measured noise level, :data:`.general_method.PUBLISH_NOISE_SCALE`), with each line's moment
+and direction eliminated (their Schur complement: the profile cost's curvature), times the
+measured noise. Single bodies, 30 lines, 0.5 px, the fits over noise draws
+(docs/design/general.md): a rotation about the camera, mean NEES 2.2 (honest: 3; 5.7 with
+the moments held, as the LM holds them); a slow body that translates (0.5 deg per frame) is
+covered far better than by the information at the measured level, whose direction prior
+holds first-order information the published fit does not use (5-12x too narrow in
+variance), though its fits stay biased.
+
 The noise level is measured over all lines; a body the model fits worse (model error over
 the window, a rotation partly explained by translation) would publish a covariance that does
 not cover its error, so the covariance is widened by the body's reduced chi-square. Measured
-on bench covariance (window 10, NEES of a consistent estimate: median 2.37, 95% of the frames
-<= 7.81): boxes within 5% of their omega, NEES median 16-36 -> 3.3-7.8 (own-centre scenes);
+when it came (the information then at the measured level, the moments held) on bench
+covariance (window 10, NEES of a consistent estimate: median 2.37, 95% of the frames <=
+7.81): boxes within 5% of their omega, NEES median 16-36 -> 3.3-7.8 (own-centre scenes);
 camera-centre rotation (the model holds) 5.8 -> 2.5 with 92% of the frames within the 95%
 bound. A box fitted in a wrong basin stays far outside (NEES 34 to 5100): that is a second
 minimum, not a wider one. Where a body's rescan (the pivot starts, the Necker mirror) ends in
@@ -36,7 +47,8 @@ from ..lines import orthonormal_pair
 
 def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np.ndarray,
                     sigma2: float, marginal: bool = False,
-                    fitted: Optional[np.ndarray] = None) -> np.ndarray:
+                    fitted: Optional[np.ndarray] = None,
+                    fitted_at: Optional[float] = None) -> np.ndarray:
     """
     Return the covariance ``(3, 3)`` of a body's rotation vector from the Gauss-Newton information.
 
@@ -45,21 +57,26 @@ def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np
     then also scaled by the body's reduced chi-square (its fitted-direction costs over
     ``sigma2``) when above 1; ``fitted (L,)``: those costs of the tracks ``idx`` at ``(w, t)``
     if already known (:func:`.general_costs`; NaN: fewer than 3 frames, no constraint).
-    One body of :func:`body_covariances`.
+    ``fitted_at`` (px^2): the noise level of the marginalised cost ``(w, t)`` minimise, when
+    not ``sigma2`` (:func:`body_covariances`). One body of :func:`body_covariances`.
     """
     return body_covariances(obs, [idx], np.asarray(w, dtype=float)[None],
                             np.asarray(t, dtype=float)[None], sigma2, marginal,
-                            None if fitted is None else [fitted])[0]
+                            None if fitted is None else [fitted], fitted_at)[0]
 
 
 def body_covariances(obs: LineObservations, members: Sequence[np.ndarray], W: np.ndarray,
                      T: np.ndarray, sigma2: float, marginal: bool = False,
-                     fitted: Optional[Sequence[np.ndarray]] = None) -> np.ndarray:
+                     fitted: Optional[Sequence[np.ndarray]] = None,
+                     fitted_at: Optional[float] = None) -> np.ndarray:
     """
     Return :func:`body_covariance` of several bodies at once, ``(B, 3, 3)``.
 
     ``members``: each body's track indices; ``W, T (B, 3)`` their motions; ``fitted``: each
-    body's fitted-direction costs of its tracks if known. A body with fewer than 3 tracks
+    body's fitted-direction costs of its tracks if known. ``fitted_at`` (px^2, marginal
+    only): the noise level of the cost the motions minimise when it is not ``sigma2`` (the
+    published motions: a fraction of it); the information is that cost's, the noise
+    ``sigma2``. A body with fewer than 3 tracks
     gets an infinite covariance. The bodies are evaluated in one batch, their tracks padded
     (:func:`.fit.padded_members`).
     """
@@ -70,12 +87,13 @@ def body_covariances(obs: LineObservations, members: Sequence[np.ndarray], W: np
     idx, mask = padded_members([members[b] for b in some])
     W, T = np.asarray(W, dtype=float)[some], np.asarray(T, dtype=float)[some]
     rows, base = obs.rows[idx], obs.m_first[idx]
-    sigma = sigma2 if marginal else None
+    sigma = (sigma2 if fitted_at is None else fitted_at) if marginal else None
     products = obs.row_products(idx)
     _, n0 = _costs2(rows, base, W, T, sigma, products=products)
     # the Gauss-Newton information with the line directions marginalised (or fitted) and the
-    # moments held, analytic (:func:`.jacobian.normal_equations`), in units of sigma2
-    info = normal_equations(rows, W, T, n0, orthonormal_pair(n0), sigma, mask=mask)[0]
+    # moments eliminated, analytic (:func:`.jacobian.normal_equations`), in units of sigma2
+    info = normal_equations(rows, W, T, n0, orthonormal_pair(n0), sigma, mask=mask,
+                            moments=True)[0]
     scale = np.ones(len(some))
     if marginal:
         # the data term alone: the fitted-direction costs (px^2, two unknowns per line); the

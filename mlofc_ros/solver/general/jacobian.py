@@ -122,8 +122,8 @@ def _components(x: np.ndarray) -> list:
 
 def normal_equations(rows: np.ndarray, W: np.ndarray, T: np.ndarray, n0: np.ndarray,
                      basis: np.ndarray, sigma2: Optional[float],
-                     scale: Optional[np.ndarray] = None, mask: Optional[np.ndarray] = None
-                     ) -> Tuple[np.ndarray, np.ndarray]:
+                     scale: Optional[np.ndarray] = None, mask: Optional[np.ndarray] = None,
+                     moments: bool = False) -> Tuple[np.ndarray, np.ndarray]:
     """
     Return the reduced Gauss-Newton systems ``H (A, 6, 6)``, ``g (A, 6)`` of motions ``W, T``.
 
@@ -136,6 +136,10 @@ def normal_equations(rows: np.ndarray, W: np.ndarray, T: np.ndarray, n0: np.ndar
     current quadratic cost ``q`` (iteratively reweighted), the log-determinant not.
     ``mask (A, L)``: 1 for a run's lines, 0 for its padding (left out). Parameters:
     ``(w, T)`` in rad per frame and T's units; ``g`` is half the cost's gradient at ``n0``.
+    ``moments``: each line's moment is eliminated too (its two tangent directions, ``v0``
+    kept orthogonal to it), as the directions are: the information of the profile cost, whose
+    inverse is the motion's covariance (at the moments that minimise the cost; the LM holds
+    them instead, which is enough to step by).
     """
     L, K = rows.shape[-4], rows.shape[-3]
     A = W.shape[0]
@@ -166,11 +170,25 @@ def normal_equations(rows: np.ndarray, W: np.ndarray, T: np.ndarray, n0: np.ndar
     wt = np.ones((A, L)) if scale is None else scale / (scale + q)
     if mask is not None:
         wt = wt * mask
-    G = MT @ J                                                            # (A, L, 2, 6)
+    # the columns of the per-line unknowns eliminated (transposed), their regularised Gram
+    # matrix's inverse
+    NT, Ninv = MT, Sinv
+    if moments:
+        # the moment turned by basis @ d (and v0 by -n0 (v0 . basis @ d), orthogonal to it):
+        # its columns join the directions', the prior on the directions only
+        Jn = An @ basis - (Av @ n0[..., None]) @ (v0[..., None, :] @ basis)   # (A, L, 2K, 2)
+        NT = np.swapaxes(np.concatenate([M, Jn], axis=-1), -1, -2)       # (A, L, 4, 2K)
+        N2 = NT @ np.swapaxes(NT, -1, -2) + np.diag([reg, reg, 0.0, 0.0])
+        # a ridge of 1e-12 of the trace: a column a line does not constrain (its G row is
+        # zero) drops out as in a pseudo-inverse, at a seventh of pinv's cost
+        tr = np.einsum('...ii->...', N2)
+        Ninv = np.linalg.inv(N2 + (1e-12 * np.where(tr > 0.0, tr, 1.0))[..., None, None]
+                             * np.eye(4))
+    G = NT @ J                                                            # (A, L, 2|4, 6)
     Jw = J * wt[..., None, None]
     H = (np.swapaxes(Jw.reshape(A, -1, 6), -1, -2) @ J.reshape(A, -1, 6)
          - np.swapaxes((G * wt[..., None, None]).reshape(A, -1, 6), -1, -2)
-         @ (Sinv @ G).reshape(A, -1, 6))
+         @ (Ninv @ G).reshape(A, -1, 6))
     g = (np.swapaxes(Jw.reshape(A, -1, 6), -1, -2) @ rho.reshape(A, -1, 1))[..., 0]
     if sigma2 is not None:
         # log-determinant sigma2 log det(S / sigma2): d = 2 sigma2 tr(S^-1 M^T dM), dM = dAv B,
