@@ -138,7 +138,10 @@ def merge_candidate(res: SegmentationResult, dof: np.ndarray, pairs: bool = True
     if not pairs:
         return None
     w = np.asarray(res.segmentation_angular_velocities, dtype=float).reshape(-1, 3)
-    cov = np.asarray(res.angular_covariances, dtype=float).reshape(-1, 3, 3)
+    # within the noise: a body its motion misfits (two motions in one, its covariance widened
+    # by its reduced chi-square) is not close to every other; it wants a split, not a merge
+    cov = np.asarray(res.angular_covariances if res.noise_covariances is None
+                     else res.noise_covariances, dtype=float).reshape(-1, 3, 3)
     best, pair = MERGE_CHI2, None
     for i in range(n):
         for j in range(i + 1, n):

@@ -59,6 +59,14 @@ def test_trials_one_less_and_one_more():
     # distinct motions: no trial
     assert merge_candidate(_result(labels, [[0.01, 0, 0], [0, 0, 0], [0, 0.01, 0]]),
                            dof) is None
+    # ... nor where a body's published covariance is wide because its motion misfits it (two
+    # motions in one: general's reduced chi-square scale): compared within the noise alone
+    mixed = _result(labels, [[0.01, 0, 0], [0, 0, 0], [0, 0, 2e-3]])
+    mixed.noise_covariances = mixed.angular_covariances.copy()
+    mixed.angular_covariances[2] *= 100.0
+    assert merge_candidate(mixed, dof) is None
+    mixed.noise_covariances = None
+    assert merge_candidate(mixed, dof)[1:] == (2, 1)
     # one more: the unexplained tracks as body n, when there are enough of them
     loose = labels.copy()
     loose[:6] = -1

@@ -407,7 +407,8 @@ def _result(obs: LineObservations, diagnostics: Diagnostics, focal_length: float
     at the motions of ``sol`` if known.
     """
     labels = sol['labels']
-    W_pub, cov = _published(obs, labels, sol['W'], sol['T'], sigma2, iterations, fitted)
+    W_pub, cov, noise_cov = _published(obs, labels, sol['W'], sol['T'], sigma2, iterations,
+                                       fitted)
     spreads = sol.get('spreads')
     if spreads is not None:
         # the other minima a rescan found widen the covariance towards them
@@ -426,14 +427,17 @@ def _result(obs: LineObservations, diagnostics: Diagnostics, focal_length: float
                               focal_length=focal_length, residuals=rms, costs=sol['costs'],
                               method='general', segmentation_angular_velocities=sol['W'],
                               translation_directions=directions, basin_spreads=spreads,
-                              diagnostics=diagnostics)
+                              noise_covariances=noise_cov, diagnostics=diagnostics)
 
 
 def _published(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.ndarray,
                sigma2: float, iterations: int, fitted: Optional[np.ndarray] = None
-               ) -> Tuple[np.ndarray, np.ndarray]:
+               ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
-    Return the published rotation vectors ``(n, 3)`` and their covariances ``(n, 3, 3)``.
+    Return the published rotation vectors ``(n, 3)`` and two covariances ``(n, 3, 3)`` each.
+
+    The covariances: the published ones, and those of the noise alone (without the
+    model-error scale: :attr:`.SegmentationResult.noise_covariances`).
 
     Each body's refit (:func:`published_motions`); a body whose refit has no finite covariance
     publishes the segmentation's motion ``W`` (nor would it decide, through the pipeline's
@@ -454,21 +458,25 @@ def _published(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.n
              if fitted is not None and np.all(same) else None)
     fine = (np.ones(n, dtype=bool) if iterations == 0 and PUBLISH_NOISE_SCALE is not None
             else ~same)
-    cov = np.full((n, 3, 3), np.inf)
+    cov, scales = np.full((n, 3, 3), np.inf), np.ones(n)
     for at_fine in (True, False):
         some = np.flatnonzero(fine == at_fine)
         if some.size:
+            out: list = []
             cov[some] = body_covariances(
                 obs, [members[b] for b in some], W_pub[some], T_pub[some], sigma2,
                 marginal=True, fitted=None if known is None else [known[b] for b in some],
-                fitted_at=sigma2 * PUBLISH_NOISE_SCALE if at_fine else None)
+                fitted_at=sigma2 * PUBLISH_NOISE_SCALE if at_fine else None, scales_out=out)
+            scales[some] = out[0]
     back = [b for b in range(W.shape[0])
             if not np.all(np.isfinite(cov[b])) and not np.array_equal(W_pub[b], W[b])]
     if back:
         W_pub[back], T_pub[back] = W[back], T[back]
+        out = []
         cov[back] = body_covariances(obs, [members[b] for b in back], W[back], T[back],
-                                     sigma2, marginal=True)
-    return W_pub, cov
+                                     sigma2, marginal=True, scales_out=out)
+        scales[back] = out[0]
+    return W_pub, cov, cov / scales[:, None, None]
 
 
 def published_motions(obs: LineObservations, labels: np.ndarray, W: np.ndarray,

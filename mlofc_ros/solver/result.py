@@ -143,6 +143,12 @@ class SegmentationResult:
         rescan found none); NaN for the bodies not rescanned, None for the other methods
         (:func:`.general.basin_spread`). A stream carries a body's last one to the solves
         that do not rescan it.
+    noise_covariances : (n, 3, 3) float64 or None
+        Method 'general': the covariance of each row of ``angular_velocities`` from the noise
+        alone ((rad/frame)^2), without what ``angular_covariances`` adds for a body its motion
+        misfits (its reduced chi-square) and for the other minima: the automatic count
+        compares two bodies' rotations within it (:func:`mlofc_ros.counting.merge_candidate`).
+        None: the same as ``angular_covariances`` (the rotation-only methods).
     diagnostics : Diagnostics
         How the result was found (noise level, starts, scores).
 
@@ -158,6 +164,7 @@ class SegmentationResult:
     segmentation_angular_velocities: Optional[np.ndarray] = None
     translation_directions: Optional[np.ndarray] = None
     basin_spreads: Optional[np.ndarray] = None
+    noise_covariances: Optional[np.ndarray] = None
     diagnostics: Diagnostics = field(default_factory=Diagnostics)
 
     def __post_init__(self) -> None:

@@ -68,7 +68,8 @@ def body_covariance(obs: LineObservations, idx: np.ndarray, w: np.ndarray, t: np
 def body_covariances(obs: LineObservations, members: Sequence[np.ndarray], W: np.ndarray,
                      T: np.ndarray, sigma2: float, marginal: bool = False,
                      fitted: Optional[Sequence[np.ndarray]] = None,
-                     fitted_at: Optional[float] = None) -> np.ndarray:
+                     fitted_at: Optional[float] = None,
+                     scales_out: Optional[list] = None) -> np.ndarray:
     """
     Return :func:`body_covariance` of several bodies at once, ``(B, 3, 3)``.
 
@@ -76,11 +77,16 @@ def body_covariances(obs: LineObservations, members: Sequence[np.ndarray], W: np
     body's fitted-direction costs of its tracks if known. ``fitted_at`` (px^2, marginal
     only): the noise level of the cost the motions minimise when it is not ``sigma2`` (the
     published motions: a fraction of it); the information is that cost's, the noise
-    ``sigma2``. A body with fewer than 3 tracks
+    ``sigma2``. ``scales_out``: a list that receives each body's reduced chi-square scale
+    ``(B,)`` (1 where none: the covariance over it is the noise's alone). A body with fewer
+    than 3 tracks
     gets an infinite covariance. The bodies are evaluated in one batch, their tracks padded
     (:func:`.fit.padded_members`).
     """
     cov = np.full((len(members), 3, 3), np.inf)
+    scales = np.ones(len(members))
+    if scales_out is not None:
+        scales_out.append(scales)
     some = [b for b, m in enumerate(members) if len(m) >= 3]          # bodies, not lines
     if not some:
         return cov
@@ -109,6 +115,7 @@ def body_covariances(obs: LineObservations, members: Sequence[np.ndarray], W: np
         with np.errstate(invalid='ignore', divide='ignore'):
             chi2 = np.where((dof > 0) & np.isfinite(total), total / dof / sigma2, 1.0)
         scale = np.maximum(chi2, 1.0)
+    scales[some] = scale
     try:
         # every body in one call; where one's SVD fails, each on its own
         cov[some] = (scale * sigma2)[:, None, None] * np.linalg.pinv(info, rcond=1e-10)[
