@@ -468,7 +468,7 @@ def _published(obs: LineObservations, labels: np.ndarray, W: np.ndarray, T: np.n
                 marginal=True, fitted=None if known is None else [known[b] for b in some],
                 fitted_at=sigma2 * PUBLISH_NOISE_SCALE if at_fine else None, scales_out=out)
             scales[some] = out[0]
-    back = [b for b in range(W.shape[0])
+    back = [b for b in range(n)
             if not np.all(np.isfinite(cov[b])) and not np.array_equal(W_pub[b], W[b])]
     if back:
         W_pub[back], T_pub[back] = W[back], T[back]

@@ -79,9 +79,8 @@ def body_covariances(obs: LineObservations, members: Sequence[np.ndarray], W: np
     published motions: a fraction of it); the information is that cost's, the noise
     ``sigma2``. ``scales_out``: a list that receives each body's reduced chi-square scale
     ``(B,)`` (1 where none: the covariance over it is the noise's alone). A body with fewer
-    than 3 tracks
-    gets an infinite covariance. The bodies are evaluated in one batch, their tracks padded
-    (:func:`.fit.padded_members`).
+    than 3 tracks gets an infinite covariance. The bodies are evaluated in one batch, their
+    tracks padded (:func:`.fit.padded_members`).
     """
     cov = np.full((len(members), 3, 3), np.inf)
     scales = np.ones(len(members))
