@@ -47,13 +47,16 @@ class SolveJob:
     is published for; ``generation``: the pipeline's solve state it started from (a job
     from before a reset or a reconfiguration is dropped). ``rescan``: a step that rescans a
     body instead (its frame was answered by a step without it; the answer is the body's
-    motion, not published).
+    motion, not published). ``polish``: which tracked solve of a search's window this is
+    (1, 2, ...), from ``before``, the answer it polishes (0 and None: not a polish).
     """
 
     obs: Observation
     keywords: Dict[str, Any]
     generation: int
     rescan: bool = False
+    polish: int = 0
+    before: Optional[SegmentationResult] = None
 
 
 #: What :meth:`poll` returns: the job and its result, or the exception it raised.

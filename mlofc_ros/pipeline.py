@@ -49,7 +49,7 @@ from mlofc_ros.method_choice import (AUTO, MethodChoice, MIN_JITTER_FRAMES, misf
                                      ROTATION_METHOD, track_jitter, TRANSLATION_METHOD)
 from mlofc_ros.solver import get_method, Method, segment_lines, SegmentationResult, StepNotTaken
 from mlofc_ros.solver.focal import focal_evidence, FOCAL_PRIOR_LOG_SIGMA, FocalEstimate
-from mlofc_ros.solver.warm import result_motions, WarmStarts
+from mlofc_ros.solver.warm import FULL_AFTER_SEARCH, result_motions, WarmStarts
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.tracker import LineTracker
 from mlofc_ros.tracks.undistort import undistort_segments
@@ -64,6 +64,8 @@ MIN_BODY_TRACKS = 4
 #: With no calibration, the focal length starts at the median of this many window estimates
 #: (each from a solve with f unknown), then is refined from non-overlapping windows.
 FOCAL_SAMPLES = 8
+#: A lane's search answer is polished until fewer than this share of its labels change.
+POLISH_SETTLED = 0.02
 
 
 class RunningFit(NamedTuple):
@@ -918,9 +920,13 @@ class Pipeline:
         for by a step that did not hold is out, each step rescans a body in turn itself.
         """
         finished = lane.poll()
+        if finished is not None:
+            finished = self._polished(finished, lane, problems)
         adopted = finished is not None and self._adopt(finished, problems)
         keywords = self._warm.keywords(method, self.bodies.previous_labels(obs.win_ids), n)
-        if not lane.busy and self._warm.full_solve_due():
+        first = 'init_motions' not in keywords
+        if (not lane.busy and self._warm.full_solve_due()
+                and not (first and obs.win_tracks.shape[1] < self.window_size)):
             # a search or a full solve, from the running fit as it is now
             lane.submit(SolveJob(dataclasses.replace(obs, gray=None),
                                  dict(common, tracks=obs.win_tracks, n_bodies=n, **keywords),
@@ -962,6 +968,42 @@ class Pipeline:
             self._warm.step_declined(exc.motions)     # the lane's full solve next
             self._from_running_fit = True
             return None
+
+    def _polished(self, finished: Finished, lane: Any, problems: List[str]
+                  ) -> Optional[Finished]:
+        """
+        Return a lane's answer to adopt, or None while a search's window is being polished.
+
+        A search's answer (and each polish's) goes back to the lane as a tracked full solve
+        of the same window, every body rescanned, from its labels and motions, until the
+        labels settle (fewer than :data:`POLISH_SETTLED` of them change) or
+        :data:`~mlofc_ros.solver.warm.FULL_AFTER_SEARCH` polishes: what the frames after a
+        search do when every frame is solved in turn (a search alone often misses a box
+        that the rescans find), on one window instead of the next ones, which the lane
+        reaches only a full solve's delay later each (own3+bg, render seed 3, replayed with
+        the lane's delays: the follow-up full solves of moving windows, each from stale
+        labels, lost again the boxes the one before found). A polish that failed gives the
+        answer before it.
+        """
+        job, result = finished
+        if (job.rescan or job.generation != self._generation
+                or (job.polish == 0 and 'init_motions' in job.keywords)):
+            return finished                  # not a search's window
+        if not isinstance(result, SegmentationResult):
+            if job.before is None:
+                return finished
+            problems.append(f'polish of a search: {type(result).__name__}: {result}')
+            return job, job.before
+        before = job.before
+        if ((before is not None
+             and np.mean(np.asarray(result.labels) != np.asarray(before.labels)) < POLISH_SETTLED)
+                or job.polish >= FULL_AFTER_SEARCH):
+            return finished
+        keywords = dict(job.keywords, init_labels=np.asarray(result.labels),
+                        init_motions=result_motions(result), rescan=list(range(result.n_bodies)))
+        lane.submit(SolveJob(job.obs, keywords, job.generation, polish=job.polish + 1,
+                             before=result))
+        return None
 
     def _adopt(self, finished: Finished, problems: List[str]) -> bool:
         """
