@@ -25,7 +25,7 @@ from mlofc_ros.pipeline import (focal_covariance, FOCAL_SAMPLES, FrameResult, Pi
 from mlofc_ros.segments.detect import has_ximgproc
 from mlofc_ros.solver import get_method, segment_lines
 from mlofc_ros.solver.focal import FOCAL_PRIOR_LOG_SIGMA
-from mlofc_ros.solver.warm import WARM_FLOOR_MARGIN, WARM_FLOOR_SOLVES
+from mlofc_ros.solver.warm import FULL_AFTER_SEARCH, WARM_FLOOR_MARGIN, WARM_FLOOR_SOLVES
 from mlofc_ros.tracks.undistort import undistort_segments
 from mlofc_tools.render import render_sequence
 import numpy as np
@@ -915,7 +915,6 @@ def test_a_general_stream_steps_after_its_first_full_solves(monkeypatch):
     # bodies spinning about their own centres through process_lines with method 'general':
     # a search, the full solves after it, then tracking steps; labels and ids stay right
     import mlofc_ros.pipeline as pipeline_module
-    from mlofc_ros.solver.warm import FULL_AFTER_SEARCH
     from scenes import random_scene
     tracks, truth, omegas, intr = random_scene(2, 25, n_frames=16, noise=0.2, seed=3,
                                                own_centre=True)
@@ -942,11 +941,12 @@ def test_a_general_stream_steps_after_its_first_full_solves(monkeypatch):
 
 
 def test_a_lane_runs_the_full_solves_while_the_frames_step():
-    # the node's solver process: a search and the full solves after it go to the lane; the
-    # frames meanwhile step from the running fit, or are answered from it
+    # the node's solver process: a search of the full window, its polishes and the full
+    # solves after it go to the lane; the frames meanwhile step from the running fit, or are
+    # answered from it
     from mlofc_ros.lane import InlineLane
     from scenes import random_scene
-    tracks, truth, omegas, intr = random_scene(2, 25, n_frames=30, noise=0.2, seed=3,
+    tracks, truth, omegas, intr = random_scene(2, 25, n_frames=45, noise=0.2, seed=3,
                                                own_centre=True)
     ids = np.arange(tracks.shape[0])
     p = Pipeline(num_bodies=2, window=10, method='general')
@@ -957,14 +957,19 @@ def test_a_lane_runs_the_full_solves_while_the_frames_step():
     lane.submit = lambda job: jobs.append(job) or real_submit(job)
     results = [p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
                for k in range(tracks.shape[1])]
-    first = get_method('general').min_frames - 1          # the first general window
+    first = 10 - 1                                          # the first full window
     assert jobs and round(jobs[0].obs.stamp * 30.0) == first
     assert 'init_motions' not in jobs[0].keywords           # a search
     assert all('init_motions' in job.keywords for job in jobs[1:])   # full solves
-    # until the search is back the frames are answered from the running fit; then they step
-    waiting = results[first:first + 5]
-    assert all(not r.body_valid.any() and r.from_running_fit for r in waiting)
-    stepped = [r for r in results[first + 5:] if r.body_valid.all()]
+    polishes = [job for job in jobs if job.polish]
+    assert 1 <= len(polishes) <= FULL_AFTER_SEARCH
+    assert [job.polish for job in jobs[1:len(polishes) + 1]] == list(range(1, len(polishes) + 1))
+    assert all(job.obs is jobs[0].obs for job in polishes)  # the search's own window
+    assert all(job.keywords['rescan'] == [0, 1] for job in polishes)
+    # until the polished search is back the frames are answered from the running fit
+    back = first + 5 * (len(polishes) + 1)
+    assert all(not r.body_valid.any() and r.from_running_fit for r in results[first:back])
+    stepped = [r for r in results[back:] if r.body_valid.all()]
     assert not any(r.from_running_fit for r in stepped)
     assert len(stepped) >= 18
     for r in results[-3:]:
@@ -1050,12 +1055,12 @@ def test_a_lane_answer_started_before_a_reconfiguration_is_dropped(change, monke
     import mlofc_ros.pipeline as pipeline_module
     from mlofc_ros.lane import InlineLane
     from scenes import random_scene
-    tracks, _, _, intr = random_scene(2, 25, n_frames=20, noise=0.2, seed=3, own_centre=True)
+    tracks, _, _, intr = random_scene(2, 25, n_frames=45, noise=0.2, seed=3, own_centre=True)
     ids = np.arange(tracks.shape[0])
     p = Pipeline(num_bodies=2, window=10, method='general')
     lane = InlineLane(delay=3)
     p.use_lane(lane)
-    for k in range(6):                                   # the search submitted at frame 4
+    for k in range(11):                                  # the search submitted at frame 9
         p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
     assert lane.busy
     adopted = []
@@ -1067,7 +1072,8 @@ def test_a_lane_answer_started_before_a_reconfiguration_is_dropped(change, monke
         p.reconfigure(seed=7)
     else:
         p.reset()
-    for k in range(6, 20):
+    for k in range(11, 45):
         r = p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
-    # the stale search was dropped, a new one went in and came back
-    assert adopted[0] is False and adopted[1:] and all(adopted[1:]) and r.body_valid.all()
+    # the stale search was dropped, a new one went in and came back (the rescans after it
+    # are not adopted either: their motions go to the running fit)
+    assert adopted[0] is False and adopted[1] is True and r.body_valid.all()

@@ -189,7 +189,7 @@ def test_a_child_that_cannot_be_restarted_is_reported_at_every_solve(monkeypatch
 
 def test_a_child_steps_the_frames_while_its_lane_runs_the_full_solves():
     from scenes import random_scene
-    tracks, truth, _, intr = random_scene(2, 25, n_frames=90, noise=0.2, seed=3,
+    tracks, truth, _, intr = random_scene(2, 25, n_frames=120, noise=0.2, seed=3,
                                           own_centre=True)
     ids = np.arange(tracks.shape[0])
     observing = Pipeline(num_bodies=2, window=10, method='general')
