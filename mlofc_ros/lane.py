@@ -21,10 +21,10 @@ steps for a rescan of one body (a step of about 90 ms). A
 :class:`~mlofc_ros.pipeline.Pipeline` given a lane (:meth:`Pipeline.use_lane`) hands those to
 the lane instead and steps the frames meanwhile from the running fit; when the lane's answer
 comes back it becomes the running fit (a rescan's: the body's motion, when it moved to another
-basin), and the next frame steps from it. The node's solver
-process does so (:class:`mlofc_ros.solve_process.ProcessLane`: one more child process);
-:class:`InlineLane` runs the job at once and hands it back a given number of frames later
-(tests, offline replays).
+basin; a search's once polished on its window by more jobs), and the next frame steps from
+it. The node's solver process does so (:class:`mlofc_ros.solve_process.ProcessLane`: one
+more child process); :class:`InlineLane` runs the job at once and hands it back a given
+number of frames later (tests, offline replays).
 
 A lane runs one job at a time: :meth:`submit` only when not :attr:`busy`; :meth:`poll`
 returns the finished job with its result (or the exception it raised), once.

@@ -775,9 +775,11 @@ class Pipeline:
         With a known count and a method that steps (``general``), a frame whose schedule asks
         for a search or a full solve hands it to the lane (when idle) and is stepped from
         the running fit meanwhile, or answered from it (:meth:`carry`) when the step does not
-        hold and until the first search is back; the lane's answer becomes the running fit
-        at the next :meth:`solve`, and the first step from it labels every track afresh at
-        its motions (its labels are of a window the stream has since left). ``lane``: an
+        hold and until the first search is back (the search waits for a full window, and its
+        answer is polished on that window first: :meth:`_polished`); the lane's answer
+        becomes the running fit at the next :meth:`solve`, and the first step from it labels
+        every track afresh at its motions (its labels are of a window the stream has since
+        left). ``lane``: an
         :class:`~mlofc_ros.lane.InlineLane`, a
         :class:`~mlofc_ros.solve_process.ProcessLane`, or None to solve every frame here
         (the default). A job in flight is dropped.
@@ -932,7 +934,10 @@ class Pipeline:
                                  dict(common, tracks=obs.win_tracks, n_bodies=n, **keywords),
                                  self._generation))
         if 'init_motions' not in keywords:
-            self._from_running_fit = True         # nothing to step from before the first search
+            # nothing to step from before the first search, which waits for a full window
+            # (a search of 5 frames often put a box with the background or two together:
+            # bench lane x1, own3+bg render seed 4, 16 -> 3.5% wrong)
+            self._from_running_fit = True
             return None
         if not keywords.get('step'):              # meanwhile a step
             keywords = {k: v for k, v in keywords.items() if k != 'rescan'}

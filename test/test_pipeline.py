@@ -23,7 +23,7 @@ from mlofc_ros.bodies import assign, BodyTracker, relabel
 from mlofc_ros.pipeline import (focal_covariance, FOCAL_SAMPLES, FrameResult, Pipeline,
                                 TIMING_KEYS)
 from mlofc_ros.segments.detect import has_ximgproc
-from mlofc_ros.solver import get_method, segment_lines
+from mlofc_ros.solver import segment_lines
 from mlofc_ros.solver.focal import FOCAL_PRIOR_LOG_SIGMA
 from mlofc_ros.solver.warm import FULL_AFTER_SEARCH, WARM_FLOOR_MARGIN, WARM_FLOOR_SOLVES
 from mlofc_ros.tracks.undistort import undistort_segments
@@ -1025,7 +1025,7 @@ def test_while_a_full_solve_is_out_the_steps_rescan_a_body_in_turn(monkeypatch):
     from mlofc_ros.solver import StepNotTaken
     from mlofc_ros.solver.warm import result_motions
     from scenes import random_scene
-    tracks, _, _, intr = random_scene(2, 25, n_frames=30, noise=0.2, seed=3, own_centre=True)
+    tracks, _, _, intr = random_scene(2, 25, n_frames=60, noise=0.2, seed=3, own_centre=True)
     ids = np.arange(tracks.shape[0])
     p = Pipeline(num_bodies=2, window=10, method='general')
     lane = InlineLane(delay=6)
