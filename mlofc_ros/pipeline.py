@@ -64,10 +64,11 @@ MIN_BODY_TRACKS = 4
 #: With no calibration, the focal length starts at the median of this many window estimates
 #: (each from a solve with f unknown), then is refined from non-overlapping windows.
 FOCAL_SAMPLES = 8
-#: A lane's search answer is polished until fewer than this share of its labels change (bench
-#: lane x1, six seeds, own2+bg / own3+bg wrong %: 0.02 3.06 / 4.59, 0.1 2.79 / 4.16, 0.2
-#: 2.98 / 4.16; unlabelled 23.3 / 25.9, 21.7 / 21.1, 18.5 / 21.1).
-POLISH_SETTLED = 0.1
+#: A lane's search answer is polished until fewer than this share of its labels change (0.1
+#: replayed a little better, bench lane x1 own2+bg / own3+bg 3.06 / 4.59 -> 2.79 / 4.16%
+#: wrong, but the live node at 30 Hz stepped fewer frames from its less settled answers,
+#: own3+bg `auto` 9-10% of the frames solved against 22-28%, 48% unlabelled against 39%).
+POLISH_SETTLED = 0.02
 
 
 class RunningFit(NamedTuple):
