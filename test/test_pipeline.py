@@ -1050,6 +1050,34 @@ def test_while_a_full_solve_is_out_the_steps_rescan_a_body_in_turn(monkeypatch):
     assert results[-1].body_valid.all() and not results[-1].from_running_fit
 
 
+def test_a_search_whose_polish_fails_is_adopted_as_it_was(monkeypatch):
+    # the lane's first polish of the search's window raises: the search's own answer becomes
+    # the running fit, and the failure is said in the frame's problem
+    import mlofc_ros.lane as lane_module
+    from mlofc_ros.lane import InlineLane
+    from scenes import random_scene
+    tracks, _, _, intr = random_scene(2, 25, n_frames=30, noise=0.2, seed=3, own_centre=True)
+    ids = np.arange(tracks.shape[0])
+    p = Pipeline(num_bodies=2, window=10, method='general')
+    lane = InlineLane(delay=2)
+    p.use_lane(lane)
+    real, calls = lane_module.segment_lines, []
+
+    def first_polish_fails(**k):
+        calls.append(k)
+        if 'init_motions' in k and sum('init_motions' in c for c in calls) == 1:
+            raise RuntimeError('a test')
+        return real(**k)
+
+    monkeypatch.setattr(lane_module, 'segment_lines', first_polish_fails)
+    results = [p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+               for k in range(tracks.shape[1])]
+    said = [r for r in results if r.problem and 'polish of a search: RuntimeError' in r.problem]
+    assert len(said) == 1
+    assert results[-1].body_valid.all()
+    assert 'init_motions' not in calls[0] and calls[1]['rescan'] == [0, 1]
+
+
 @pytest.mark.parametrize('change', ['reconfigure', 'reset'])
 def test_a_lane_answer_started_before_a_reconfiguration_is_dropped(change, monkeypatch):
     import mlofc_ros.pipeline as pipeline_module
