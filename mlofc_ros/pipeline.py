@@ -921,8 +921,9 @@ class Pipeline:
         ``common``: the solver's keywords for the window (camera, seed, method), warm starts
         aside. Returns the result (None: answer from the running fit). The lane's finished
         job, if any, first becomes the running fit (a rescan's: the rescanned body's motion,
-        when it found another basin), and this step starts from it. While a full solve asked
-        for by a step that did not hold is out, each step rescans a body in turn itself.
+        when it found another basin; a search's once polished, :meth:`_polished`), and this
+        step starts from it. While a full solve asked for by a step that did not hold is out,
+        each step rescans a body in turn itself.
         """
         finished = lane.poll()
         if finished is not None:
