@@ -940,23 +940,37 @@ def test_a_general_stream_steps_after_its_first_full_solves(monkeypatch):
         assert np.mean(r.labels >= 0) >= 0.9
 
 
+def _beside_lane(n_frames, delay):
+    """
+    Return a ``general`` pipeline beside an ``InlineLane`` answering ``delay`` frames late.
+
+    Its stream: two bodies spinning about their own centres (``scenes.random_scene``, seed 3).
+    Returned as ``(pipeline, lane, feed, truth, omegas)``; ``feed(k)`` processes frame k.
+    """
+    from mlofc_ros.lane import InlineLane
+    from scenes import random_scene
+    tracks, truth, omegas, intr = random_scene(2, 25, n_frames=n_frames, noise=0.2, seed=3,
+                                               own_centre=True)
+    ids = np.arange(tracks.shape[0])
+    p = Pipeline(num_bodies=2, window=10, method='general')
+    lane = InlineLane(delay=delay)
+    p.use_lane(lane)
+
+    def feed(k):
+        return p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+
+    return p, lane, feed, truth, omegas
+
+
 def test_a_lane_runs_the_full_solves_while_the_frames_step():
     # the node's solver process: a search of the full window, its polishes and the full
     # solves after it go to the lane; the frames meanwhile step from the running fit, or are
     # answered from it
-    from mlofc_ros.lane import InlineLane
-    from scenes import random_scene
-    tracks, truth, omegas, intr = random_scene(2, 25, n_frames=45, noise=0.2, seed=3,
-                                               own_centre=True)
-    ids = np.arange(tracks.shape[0])
-    p = Pipeline(num_bodies=2, window=10, method='general')
-    lane = InlineLane(delay=4)                  # each full solve answers 4 frames later
-    p.use_lane(lane)
+    p, lane, feed, truth, omegas = _beside_lane(45, 4)  # each full solve 4 frames later
     jobs = []
     real_submit = lane.submit
     lane.submit = lambda job: jobs.append(job) or real_submit(job)
-    results = [p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
-               for k in range(tracks.shape[1])]
+    results = [feed(k) for k in range(45)]
     first = 10 - 1                                          # the first full window
     assert jobs and round(jobs[0].obs.stamp * 30.0) == first
     assert 'init_motions' not in jobs[0].keywords           # a search
@@ -990,22 +1004,14 @@ def test_a_lane_takes_the_rescans_and_the_frames_step_without_them(monkeypatch):
     # a rescan (a step of about 4 steps' CPU) goes to the lane when it is idle; the frame steps
     # without it, and the rescans still come in turn
     import mlofc_ros.pipeline as pipeline_module
-    from mlofc_ros.lane import InlineLane
-    from scenes import random_scene
-    tracks, truth, omegas, intr = random_scene(2, 25, n_frames=40, noise=0.2, seed=3,
-                                               own_centre=True)
-    ids = np.arange(tracks.shape[0])
-    p = Pipeline(num_bodies=2, window=10, method='general')
-    lane = InlineLane(delay=2)
-    p.use_lane(lane)
+    p, lane, feed, truth, omegas = _beside_lane(40, 2)
     jobs, asked = [], []
     real_submit = lane.submit
     lane.submit = lambda job: jobs.append(job) or real_submit(job)
     real = pipeline_module.segment_lines
     monkeypatch.setattr(pipeline_module, 'segment_lines',
                         lambda *a, **k: asked.append((k, p._warm.full_next)) or real(*a, **k))
-    results = [p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
-               for k in range(tracks.shape[1])]
+    results = [feed(k) for k in range(40)]
     rescans = [job for job in jobs if job.rescan]
     assert len(rescans) >= 2
     assert {job.keywords['rescan'][0] for job in rescans} == {0, 1}
@@ -1021,15 +1027,9 @@ def test_while_a_full_solve_is_out_the_steps_rescan_a_body_in_turn(monkeypatch):
     # steps that do not hold hand a full solve to the lane; until it is back each step rescans
     # a body in turn (their motions come back with StepNotTaken)
     import mlofc_ros.pipeline as pipeline_module
-    from mlofc_ros.lane import InlineLane
     from mlofc_ros.solver import StepNotTaken
     from mlofc_ros.solver.warm import result_motions
-    from scenes import random_scene
-    tracks, _, _, intr = random_scene(2, 25, n_frames=60, noise=0.2, seed=3, own_centre=True)
-    ids = np.arange(tracks.shape[0])
-    p = Pipeline(num_bodies=2, window=10, method='general')
-    lane = InlineLane(delay=6)
-    p.use_lane(lane)
+    p, _, feed, _, _ = _beside_lane(60, 6)
     steps = []
     real = pipeline_module.segment_lines
 
@@ -1041,8 +1041,7 @@ def test_while_a_full_solve_is_out_the_steps_rescan_a_body_in_turn(monkeypatch):
         return res
 
     monkeypatch.setattr(pipeline_module, 'segment_lines', declining)
-    results = [p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
-               for k in range(tracks.shape[1])]
+    results = [feed(k) for k in range(60)]
     rescans = [s['rescan'] for s in steps if s.get('rescan')]
     assert len(rescans) == 4 and all(len(r) == 1 for r in rescans)
     assert [r[0] for r in rescans[1:]] == [(rescans[0][0] + k) % 2 for k in range(1, 4)]
@@ -1054,13 +1053,7 @@ def test_a_search_whose_polish_fails_is_adopted_as_it_was(monkeypatch):
     # the lane's first polish of the search's window raises: the search's own answer becomes
     # the running fit, and the failure is said in the frame's problem
     import mlofc_ros.lane as lane_module
-    from mlofc_ros.lane import InlineLane
-    from scenes import random_scene
-    tracks, _, _, intr = random_scene(2, 25, n_frames=30, noise=0.2, seed=3, own_centre=True)
-    ids = np.arange(tracks.shape[0])
-    p = Pipeline(num_bodies=2, window=10, method='general')
-    lane = InlineLane(delay=2)
-    p.use_lane(lane)
+    _, _, feed, _, _ = _beside_lane(30, 2)
     real, calls = lane_module.segment_lines, []
 
     def first_polish_fails(**k):
@@ -1070,8 +1063,7 @@ def test_a_search_whose_polish_fails_is_adopted_as_it_was(monkeypatch):
         return real(**k)
 
     monkeypatch.setattr(lane_module, 'segment_lines', first_polish_fails)
-    results = [p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
-               for k in range(tracks.shape[1])]
+    results = [feed(k) for k in range(30)]
     said = [r for r in results if r.problem and 'polish of a search: RuntimeError' in r.problem]
     assert len(said) == 1
     assert results[-1].body_valid.all()
@@ -1081,15 +1073,9 @@ def test_a_search_whose_polish_fails_is_adopted_as_it_was(monkeypatch):
 @pytest.mark.parametrize('change', ['reconfigure', 'reset'])
 def test_a_lane_answer_started_before_a_reconfiguration_is_dropped(change, monkeypatch):
     import mlofc_ros.pipeline as pipeline_module
-    from mlofc_ros.lane import InlineLane
-    from scenes import random_scene
-    tracks, _, _, intr = random_scene(2, 25, n_frames=45, noise=0.2, seed=3, own_centre=True)
-    ids = np.arange(tracks.shape[0])
-    p = Pipeline(num_bodies=2, window=10, method='general')
-    lane = InlineLane(delay=3)
-    p.use_lane(lane)
+    p, lane, feed, _, _ = _beside_lane(45, 3)
     for k in range(11):                                  # the search submitted at frame 9
-        p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+        feed(k)
     assert lane.busy
     adopted = []
     real = pipeline_module.Pipeline._adopt
@@ -1101,7 +1087,7 @@ def test_a_lane_answer_started_before_a_reconfiguration_is_dropped(change, monke
     else:
         p.reset()
     for k in range(11, 45):
-        r = p.process_lines(ids, tracks[:, k], k / 30.0, (1000, 1000), intr)
+        r = feed(k)
     # the stale search was dropped, a new one went in and came back (the rescans after it
     # are not adopted either: their motions go to the running fit)
     assert adopted[0] is False and adopted[1] is True and r.body_valid.all()
