@@ -937,7 +937,7 @@ class Pipeline:
             lane.submit(SolveJob(dataclasses.replace(obs, gray=None),
                                  dict(common, tracks=obs.win_tracks, n_bodies=n, **keywords),
                                  self._generation))
-        if 'init_motions' not in keywords:
+        if first:
             # nothing to step from before the first search, which waits for a full window
             # (a search of 5 frames often put a box with the background or two together:
             # bench lane x1, own3+bg render seed 4, 16 -> 3.5% wrong)
