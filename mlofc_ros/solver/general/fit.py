@@ -26,7 +26,7 @@ from typing import NamedTuple, Optional, Sequence, Tuple
 import numpy as np
 
 from .jacobian import normal_equations
-from .model import _costs2, LineObservations
+from .model import _costs2, _grams, _marginal_costs, Grams, LineObservations
 from ..lines import orthonormal_pair
 from ..models import chi2_quantile
 
@@ -155,38 +155,41 @@ def rescale_translations(obs: LineObservations, members: Sequence[np.ndarray], W
     out = np.empty_like(T)
     for s in range(0, idx.shape[0], size):               # chunks of bodies, not lines
         part = slice(s, s + size)
-        # the chunk's tracks gathered once for both batches
-        tracks = (obs.rows[idx[part]], obs.m_first[idx[part]][:, None],
-                  obs.row_products(idx[part])[:, None], mask[part])
+        # the Gram blocks at T once: at T times a scale they are the same, scaled
+        # (:func:`_scale_totals`)
+        tracks = (_grams(obs.row_products(idx[part]), W[part], T[part], obs.rows.shape[1]),
+                  obs.m_first[idx[part]][:, None], mask[part])
         body = np.arange(T[part].shape[0])
-        coarse = _scale_totals(tracks, W[part], T[part],
-                               np.broadcast_to(_COARSE, (body.size, _COARSE.size)), sigma2)
+        coarse = _scale_totals(tracks, np.broadcast_to(_COARSE, (body.size, _COARSE.size)),
+                               sigma2)
         first = np.argmin(coarse, axis=1)
         best = _COARSE[first]
         # the half steps beside the coarse winner, within the range (T = 0 stays)
         near = np.clip(best[:, None] * np.sqrt(2.0) ** np.array([-1.0, 1.0]),
                        RESCALES[1], RESCALES[-1]) * (best[:, None] > 0)
-        fine = _scale_totals(tracks, W[part], T[part], near, sigma2)
+        fine = _scale_totals(tracks, near, sigma2)
         scales = np.concatenate([best[:, None], near], axis=1)
         pick = np.argmin(np.concatenate([coarse[body, first][:, None], fine], axis=1), axis=1)
         out[part] = T[part] * scales[body, pick][:, None]
     return out
 
 
-def _scale_totals(tracks: Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-                  W: np.ndarray, T: np.ndarray, scales: np.ndarray, sigma2: float
-                  ) -> np.ndarray:
+def _scale_totals(tracks: Tuple[Grams, np.ndarray, np.ndarray], scales: np.ndarray,
+                  sigma2: float) -> np.ndarray:
     """
     Return the marginalised cost ``(B, R)`` of each body's tracks at ``T`` times each scale.
 
-    ``tracks``: the bodies' padded tracks (:func:`padded_members`) as their observation rows
-    ``(B, L, K, 2, 3)``, first normals ``(B, 1, L, 3)``, row products ``(B, 1, 9K, L)`` and
-    mask ``(B, L)``; ``W, T (B, 3)``; ``scales (B, R)``; ``sigma2`` (px^2) the noise variance.
+    ``tracks``: the bodies' padded tracks (:func:`padded_members`) as the :data:`.Grams`
+    ``(3, 3, 3, B, L)`` of their constraints at the bodies' motions ``(W, T)``, their first
+    normals ``(B, 1, L, 3)`` and mask ``(B, L)``; ``scales (B, R)``; ``sigma2`` (px^2) the
+    noise variance. The direction constraints are linear in T: at ``s T`` the Gram blocks
+    are ``An^T An``, ``s Av^T An`` and ``s^2 Av^T Av``, no new products.
     """
-    rows, base, products, mask = tracks
-    cands = T[:, None, :] * scales[:, :, None]                               # (B, R, 3)
-    w = np.broadcast_to(W[:, None, :], cands.shape)
-    res, _ = _costs2(rows, base, w, cands, sigma2, products=products)       # (B, R, L)
+    grams, base, mask = tracks
+    nn, vn, vv = grams
+    s = scales[:, :, None]                                                   # (B, R, 1)
+    res, _ = _marginal_costs((nn[:, :, :, None], vn[:, :, :, None] * s,
+                              vv[:, :, :, None] * (s * s)), base, sigma2, passes=2)  # (B, R, L)
     return np.where(mask[:, None] > 0, res, 0.0).sum(axis=-1)
 
 

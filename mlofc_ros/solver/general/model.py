@@ -32,7 +32,7 @@ translational flow spans the line's whole flow space), which leaves bodies nearl
 indistinguishable over a few frames; :func:`marginal_residuals` instead gives the direction a
 Gaussian prior scaled by the body's translation and integrates it out (docs/design/general.md).
 """
-from typing import Optional, Tuple
+from typing import Optional, Tuple, Union
 
 import numpy as np
 
@@ -236,8 +236,8 @@ def _line_eval(An: np.ndarray, AvB: np.ndarray, base: np.ndarray,
 
 #: Gram blocks of constraints (:func:`_grams`): an array ``(3, 3, 3, ..., L)`` of the
 #: entries ``[block, i, j]`` of ``An^T An``, ``Av^T An`` and ``Av^T Av`` (blocks 0, 1, 2), lines
-#: last.
-Grams = np.ndarray
+#: last; or the three blocks ``(3, 3, ..., L)`` as a tuple (broadcast against each other).
+Grams = Union[np.ndarray, Tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
 def _row_products(rows: np.ndarray) -> np.ndarray:
