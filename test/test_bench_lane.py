@@ -35,24 +35,26 @@ def test_each_job_answers_after_its_kinds_delay():
             assert isinstance(polls[waited][1], Exception)
 
 
-def _record(scene, seed, scale, wrong, errs, running_fit):
+def _record(scene, seed, scale, wrong, errs, running_fit, method='general'):
     score = {'wrong': wrong, 'unassigned': 0.1, 'omega_err': np.array(errs)}
-    return {'scene': scene, 'seed': seed, 'scale': scale, 'score': score, 'late_wrong': wrong,
-            'running_fit': running_fit}
+    return {'scene': scene, 'method': method, 'seed': seed, 'scale': scale, 'score': score,
+            'late_wrong': wrong, 'running_fit': running_fit}
 
 
 def test_the_tables_over_seeds_and_per_run():
     records = [_record('own2+bg', 0, 1.0, 0.10, [np.nan, 0.01, 0.5], 40),
-               _record('own2+bg', 1, 1.0, 0.30, [np.nan, 0.02, 0.03], 60),
-               _record('own2+bg', 0, 0.0, 0.01, [np.nan, 0.01, 0.02], 0)]
+               _record('own2+bg', 1, 1.0, 0.30, [np.nan, 0.02, 0.07], 60),
+               _record('own2+bg', 0, 0.0, 0.01, [np.nan, 0.01, 0.02], 0),
+               _record('own2+bg', 0, 1.0, 0.05, [np.nan, 0.01, 0.02], 20, 'auto')]
     summary = lane.summary_rows(records)
-    assert [row[:3] for row in summary] == [['own2+bg', 'every frame in turn', 1],
-                                            ['own2+bg', 'x1', 2]]
-    assert np.allclose(summary[1][3:5], [20.0, 30.0]) and summary[1][7] == '3 of 4'
-    assert summary[1][8] == 50.0
+    assert [row[:4] for row in summary] == [['own2+bg', 'auto', 'x1', 1],
+                                            ['own2+bg', 'general', 'every frame in turn', 1],
+                                            ['own2+bg', 'general', 'x1', 2]]
+    assert np.allclose(summary[2][4:6], [20.0, 30.0])
+    assert summary[2][8:10] == ['2 of 4', '3 of 4'] and summary[2][10] == 50.0
     rows = lane.build_rows(records)
-    assert rows[0][2] == 'every frame in turn' and rows[1][6] == '1 / 50'
-    assert rows[1][7] == '1 of 2'
+    assert rows[0][1] == 'auto' and rows[1][3] == 'every frame in turn'
+    assert rows[2][7] == '1 / 50' and rows[2][8] == '1 of 2'
 
 
 def test_a_short_replay_writes_its_report(tmp_path):
@@ -60,7 +62,8 @@ def test_a_short_replay_writes_its_report(tmp_path):
     assert lane.main(['--scenes', 'own2+bg', '--seeds', '0', '--delays', '0,1', '--frames',
                       '12', '--jobs', '1', '--out', str(tmp_path)]) == 0
     text = (tmp_path / 'README.md').read_text()
-    assert 'every frame in turn' in text and '| own2+bg | x1 | 1 |' in text
+    assert 'every frame in turn' in text and '| own2+bg | general | x1 | 1 |' in text
+    assert '| own2+bg | auto | x1 | 1 |' in text
     assert (tmp_path / 'lane.png').stat().st_size > 0
 
 
