@@ -14,7 +14,7 @@
 """LineTracker on a rendered sequence: persistent ids, no id jumps, reset, contract."""
 from mlofc_ros import params
 from mlofc_ros.segments.detect import LineDetector
-from mlofc_ros.tracks.carry import remap_velocity
+from mlofc_ros.tracks.carry import clip_to_image, remap_velocity
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.edges import refine_lines
 from mlofc_ros.tracks.tracker import LineTracker
@@ -329,3 +329,38 @@ def test_config_from_node_parameters_and_bad_values():
             TrackerConfig(**{name: value})
     with pytest.raises(ValueError, match='backend'):
         TrackerConfig(detector_backend='nope')
+
+
+def test_clip_to_image():
+    """Segments are cut at the image's border; one wholly outside is marked so."""
+    seg = np.array([[10.0, 20.0, 50.0, 20.0],        # inside
+                    [-30.0, 100.0, 30.0, 100.0],     # crosses the left border
+                    [600.0, 10.0, 700.0, 110.0],     # crosses the right border, slanted
+                    [-90.0, 5.0, -10.0, 5.0],        # wholly outside, horizontal
+                    [100.0, -50.0, 100.0, -5.0],     # wholly outside, vertical
+                    [-20.0, -20.0, 700.0, 500.0]])   # through the whole image
+    out, inside = clip_to_image(seg, (480, 640))
+    np.testing.assert_array_equal(inside, [True, True, True, False, False, True])
+    np.testing.assert_allclose(out[0], seg[0])
+    np.testing.assert_allclose(out[1], [0.0, 100.0, 30.0, 100.0])
+    np.testing.assert_allclose(out[2], [600.0, 10.0, 639.0, 49.0])
+    np.testing.assert_allclose(out[3:5], seg[3:5])
+    assert np.all((out[5, [0, 2]] >= 0) & (out[5, [0, 2]] <= 639))
+    assert np.all((out[5, [1, 3]] >= 0) & (out[5, [1, 3]] <= 479))
+
+
+def test_lines_sliding_out_of_view_stay_in_the_image():
+    """A band moving along its own edges: every reported segment stays inside the image."""
+    h, w, step = 240, 320, 7
+    ys, xs = np.mgrid[0:h, 0:w]
+    tracker = LineTracker()
+    for f in range(30):
+        # a bright horizontal band with dark ticks (texture along its edges), moving left
+        img = np.full((h, w), 60, np.uint8)
+        band = (ys >= 90) & (ys < 150)
+        img[band] = 200
+        ticks = band & (((xs + step * f) % 48) < 6)
+        img[ticks] = 110
+        ids, seg = tracker.update(img)
+        assert np.all((seg[:, [0, 2]] >= -0.5) & (seg[:, [0, 2]] <= w - 0.5)), (f, seg)
+        assert np.all((seg[:, [1, 3]] >= -0.5) & (seg[:, [1, 3]] <= h - 0.5)), (f, seg)

@@ -231,6 +231,32 @@ def grow(image: np.ndarray, seg: np.ndarray, carried: np.ndarray) -> np.ndarray:
     return seg
 
 
+def clip_to_image(seg: np.ndarray, shape: Tuple[int, int]) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return segments ``seg`` (T, 4) px clipped to the image and which keep a part in it (T,).
+
+    ``shape``: the image's (H, W); the image is ``[0, W - 1] x [0, H - 1]`` (pixel centres).
+    A line that moves along itself keeps its edge while its predicted extent slides out of
+    view: its endpoints are kept where the image still shows it (Liang-Barsky clipping). A
+    segment with no part inside is returned as it was, marked outside.
+    """
+    h, w = shape
+    seg = np.asarray(seg, dtype=np.float64)
+    x0, y0 = seg[:, 0], seg[:, 1]
+    dx, dy = seg[:, 2] - x0, seg[:, 3] - y0
+    # the four half-planes p t <= q of the parametric segment, t in [0, 1]
+    p = np.stack([-dx, dx, -dy, dy], axis=1)
+    q = np.stack([x0, (w - 1) - x0, y0, (h - 1) - y0], axis=1)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        r = q / p
+    t0 = np.max(np.where(p < 0, r, 0.0), axis=1)
+    t1 = np.min(np.where(p > 0, r, 1.0), axis=1)
+    inside = (t0 <= t1) & np.all((p != 0) | (q >= 0), axis=1)
+    t0, t1 = np.where(inside, t0, 0.0), np.where(inside, t1, 1.0)
+    out = np.stack([x0 + t0 * dx, y0 + t0 * dy, x0 + t1 * dx, y0 + t1 * dy], axis=1)
+    return out, inside
+
+
 def remap_velocity(old: np.ndarray, vel: np.ndarray, new: np.ndarray) -> np.ndarray:
     """
     Move endpoint displacements (T, 4) px of segments ``old`` (T, 4) to the ends of ``new``.

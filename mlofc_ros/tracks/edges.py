@@ -112,6 +112,8 @@ def _normal_search(image: np.ndarray, pts: np.ndarray, nrm: np.ndarray, radius: 
     ties: the stronger), refined by a parabola, is the edge. ``signed`` (T,) bool: only the
     gradient getting darker along +normal counts on those lines; ``prefer_polarity`` px: a
     peak of the other polarity counts as that much further away (see :func:`refine_lines`).
+    A point outside the image finds nothing (the border's pixels, replicated outward, would
+    show an edge that crosses the border wherever it is predicted to slide).
     """
     t_n, s_n = pts.shape[1:]
     n = t_n * s_n
@@ -150,7 +152,9 @@ def _normal_search(image: np.ndarray, pts: np.ndarray, nrm: np.ndarray, radius: 
         score += prefer_polarity * other
     np.putmask(score, ~peak, np.inf)
     j = np.argmin(score, axis=0)
-    valid = np.isfinite(score.min(axis=0))
+    h, w = image.shape[:2]
+    px, py = pts.reshape(2, n)
+    valid = np.isfinite(score.min(axis=0)) & (px >= 0) & (px <= w - 1) & (py >= 0) & (py <= h - 1)
     # flat indices into g; the neighbours at j = 0 / kk - 1 are clipped (not used there)
     gf = g.ravel()
     at = j * n + np.arange(n)

@@ -34,7 +34,8 @@ import cv2
 from mlofc_ros.segments.common import check_gray
 from mlofc_ros.segments.detect import LineDetector
 from mlofc_ros.tracks import associate as assoc
-from mlofc_ros.tracks.carry import carry, grow, remap_velocity, update_motion
+from mlofc_ros.tracks.carry import (carry, clip_to_image, grow, remap_velocity,
+                                    update_motion)
 from mlofc_ros.tracks.config import TrackerConfig
 from mlofc_ros.tracks.frames import Frames
 from mlofc_ros.tracks.schedule import DetectionSchedule
@@ -163,8 +164,10 @@ class LineTracker:
         tr = self._tracks
         seg, carried, confirmed = carry(self._frames, image, tr.seg, tr.vel, tr.has_vel)
         vel, omega = update_motion(tr.seg, seg, carried, tr.vel, tr.omega)
-        # after the velocity: growth is new extent, not motion to extrapolate
-        return _Frame(grow(image, seg, carried), seg, carried, confirmed, vel, omega)
+        # after the velocity: growth and the image's border are new extent, not motion to
+        # extrapolate; a line carried out of view is not seen (it coasts, then retires)
+        grown, inside = clip_to_image(grow(image, seg, carried), image.shape[:2])
+        return _Frame(grown, seg, carried & inside, confirmed & inside, vel, omega)
 
     def _detect(self, gray: np.ndarray, fr: _Frame, run: bool
                 ) -> Tuple[np.ndarray, Optional[np.ndarray], float]:
