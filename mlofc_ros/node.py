@@ -241,7 +241,7 @@ class MlofcNode(Node):
 
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
                                                QoSProfile(depth=OUTPUT_DEPTH))
-        self._diag_last = (time.monotonic(), 0)
+        self._diag_last = (time.monotonic(), 0, 0)
         self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
 
@@ -384,9 +384,13 @@ class MlofcNode(Node):
         with self._lock:
             stats, problem, frame_id = dict(self.stats), self._problem, self._frame_id
             window = window_frames(self._values)
-        last_t, last_n = self._diag_last
-        self._diag_last = (now, stats['processed'])
-        rate = (stats['processed'] - last_n) / max(now - last_t, 1e-9)
+        # answered: every ~/segments message, solved or from the running fit
+        answered = stats['processed'] + stats['carried']
+        last_t, last_solved, last_answered = self._diag_last
+        self._diag_last = (now, stats['processed'], answered)
+        span = max(now - last_t, 1e-9)
+        rate = (answered - last_answered) / span
+        solved_rate = (stats['processed'] - last_solved) / span
         r, remote = self.last_result, self._remote
         recent = problem is not None and now - problem[0] <= self.problem_hold
         status = DiagnosticStatus(
@@ -396,6 +400,7 @@ class MlofcNode(Node):
             message=problem[1] if recent else 'ok')
         values = {
             'rate (Hz)': f'{rate:.2f}',
+            'solved rate (Hz)': f'{solved_rate:.2f}',
             'tracked lines': len(r.track_ids) if r is not None else 0,
             'tracks in window': r.n_tracks if r is not None else 0,
             'window fill': f'{r.window_fill if r is not None else 0}/{window}',

@@ -102,9 +102,9 @@ PARAMETERS: Tuple[ParamSpec, ...] = (
               'older id (mlofc_ros.alike).',
               range=(0, 8)),
     ParamSpec('window', int, 0,
-              'Sliding window length in frames; the solver runs on the last `window` frames at '
-              "every frame. 0 = the method's own: 10 for general and auto (a translation needs "
-              'them), 5 for the others.',
+              'Sliding window length in frames, 0 or 2-30 (one frame shows no motion); the '
+              "solver runs on the last `window` frames at every frame. 0 = the method's own: "
+              '10 for general and auto (a translation needs them), 5 for the others.',
               range=(0, 30)),
     ParamSpec('method', str, 'auto',
               'Solver method: auto = robust (rotation about the camera, fast) until its '

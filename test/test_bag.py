@@ -225,6 +225,15 @@ def test_mlofc_play_user_errors(tmp_path, capsys):
     assert play_main([str(tmp_path / 'bag'), '--rate', '-1']) == 2
 
 
+def test_mlofc_play_remaps_and_topics_add_up():
+    """``--remap`` and ``--topics`` given several times all count (as ros2 bag play's)."""
+    from mlofc_ros.bag.player import _parser
+    args = _parser().parse_args(['bag', '--remap', '/a:=/b', '--remap', '/c:=/d', '/e:=/f',
+                                 '--topics', '/a', '--topics', '/c'])
+    assert args.remap == ['/a:=/b', '/c:=/d', '/e:=/f'] and args.topics == ['/a', '/c']
+    assert _parser().parse_args(['bag']).remap == []
+
+
 def test_camera_info_pairing():
     from sensor_msgs.msg import CameraInfo
 

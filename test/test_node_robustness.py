@@ -418,8 +418,8 @@ def test_queue_drops_are_counted_and_diagnostics_report_at_1hz(harness):
     kv = {v.key: v.value for v in st.values}
     assert st.level == DiagnosticStatus.OK, (st.message, kv)
     assert st.hardware_id == FRAME_ID
-    for key in ('rate (Hz)', 'tracked lines', 'window fill', 'frames received',
-                'frames processed', 'frames dropped', 'last problem'):
+    for key in ('rate (Hz)', 'solved rate (Hz)', 'tracked lines', 'window fill',
+                'frames received', 'frames processed', 'frames dropped', 'last problem'):
         assert key in kv, kv
     assert int(kv['frames processed']) == 3 and int(kv['tracked lines']) > 20
     assert kv['focal length'] == 'given' and kv['focal length (px)'] == '300.0'

@@ -251,9 +251,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--rate', '-r', type=float, default=1.0,
                    help='playback speed factor; 0 = as fast as possible (default 1)')
     p.add_argument('--loop', '-l', action='store_true', help='play again and again')
-    p.add_argument('--topics', nargs='+', metavar='TOPIC', help='play only these topics')
-    p.add_argument('--remap', '-m', nargs='+', default=[], metavar='FROM:=TO',
-                   help='publish topic FROM as TO')
+    p.add_argument('--topics', nargs='+', action='extend', metavar='TOPIC',
+                   help='play only these topics (repeatable)')
+    p.add_argument('--remap', '-m', nargs='+', action='extend', default=[], metavar='FROM:=TO',
+                   help='publish topic FROM as TO (repeatable)')
     p.add_argument('--start-delay', '-d', type=float, default=0.0, metavar='S',
                    help='seconds to wait before publishing (after discovery)')
     p.add_argument('--wait-for-subscribers', '-w', type=float, default=0.0, metavar='S',
