@@ -362,5 +362,5 @@ def test_lines_sliding_out_of_view_stay_in_the_image():
         ticks = band & (((xs + step * f) % 48) < 6)
         img[ticks] = 110
         ids, seg = tracker.update(img)
-        assert np.all((seg[:, [0, 2]] >= -0.5) & (seg[:, [0, 2]] <= w - 0.5)), (f, seg)
-        assert np.all((seg[:, [1, 3]] >= -0.5) & (seg[:, [1, 3]] <= h - 0.5)), (f, seg)
+        assert np.all((seg[:, [0, 2]] >= 0) & (seg[:, [0, 2]] <= w - 1)), (f, seg)
+        assert np.all((seg[:, [1, 3]] >= 0) & (seg[:, [1, 3]] <= h - 1)), (f, seg)

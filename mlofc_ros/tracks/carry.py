@@ -254,6 +254,9 @@ def clip_to_image(seg: np.ndarray, shape: Tuple[int, int]) -> Tuple[np.ndarray, 
     inside = (t0 <= t1) & np.all((p != 0) | (q >= 0), axis=1)
     t0, t1 = np.where(inside, t0, 0.0), np.where(inside, t1, 1.0)
     out = np.stack([x0 + t0 * dx, y0 + t0 * dy, x0 + t1 * dx, y0 + t1 * dy], axis=1)
+    # rounding can leave a cut end a hair outside
+    hi = np.array([w - 1.0, h - 1.0, w - 1.0, h - 1.0])
+    out = np.where(inside[:, None], np.minimum(np.maximum(out, 0.0), hi), out)
     return out, inside
 
 

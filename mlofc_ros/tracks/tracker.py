@@ -130,9 +130,10 @@ class LineTracker:
         """
         Process one frame ``gray`` (H, W) uint8.
 
-        Returns ``(track_ids (M,) uint32, segments (M, 4) float32)`` px of the tracks observed
-        in this frame (carried or matched to a detection), sorted by id. Raises ``ValueError``
-        on a non-uint8/non-2D image or a change of image size (call :meth:`reset` first).
+        Returns ``(track_ids (M,) uint32, segments (M, 4) float32)`` px (within the image) of
+        the tracks observed in this frame (carried or matched to a detection), sorted by id.
+        Raises ``ValueError`` on a non-uint8/non-2D image or a change of image size (call
+        :meth:`reset` first).
         """
         check_gray(gray)
         if self._frames.shape is not None and gray.shape != self._frames.shape:
@@ -152,6 +153,9 @@ class LineTracker:
         self._frames.end()
         self._frame += 1
         out_ids, out_seg = self._tracks.ids[report], self._tracks.seg[report]
+        # a detection's endpoints, scaled back from the detector's image, may be a pixel or
+        # two past the border: what is reported lies in the image
+        out_seg = clip_to_image(out_seg, gray.shape)[0]
         order = np.argsort(out_ids, kind='stable')
         t3 = tick()
         f = cv2.getTickFrequency()
