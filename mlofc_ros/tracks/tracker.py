@@ -168,9 +168,12 @@ class LineTracker:
         tr = self._tracks
         seg, carried, confirmed = carry(self._frames, image, tr.seg, tr.vel, tr.has_vel)
         vel, omega = update_motion(tr.seg, seg, carried, tr.vel, tr.omega)
-        # after the velocity: growth and the image's border are new extent, not motion to
-        # extrapolate; a line carried out of view is not seen (it coasts, then retires)
-        grown, inside = clip_to_image(grow(image, seg, carried), image.shape[:2])
+        # after the velocity: growth is new extent, not motion to extrapolate
+        grown = grow(image, seg, carried)
+        # a line carried wholly out of view is not seen (it coasts, then retires); one partly
+        # in view keeps its whole extent (the part beyond the border is what slides in next),
+        # and is reported clipped to the image
+        inside = clip_to_image(grown, image.shape[:2])[1]
         return _Frame(grown, seg, carried & inside, confirmed & inside, vel, omega)
 
     def _detect(self, gray: np.ndarray, fr: _Frame, run: bool
