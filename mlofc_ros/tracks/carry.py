@@ -236,9 +236,9 @@ def clip_to_image(seg: np.ndarray, shape: Tuple[int, int]) -> Tuple[np.ndarray, 
     Return segments ``seg`` (T, 4) px clipped to the image and which keep a part in it (T,).
 
     ``shape``: the image's (H, W); the image is ``[0, W - 1] x [0, H - 1]`` (pixel centres).
-    A line that moves along itself keeps its edge while its predicted extent slides out of
-    view: its endpoints are kept where the image still shows it (Liang-Barsky clipping). A
-    segment with no part inside is returned as it was, marked outside.
+    Liang-Barsky clipping: the segments a frame reports lie in the image, and a carried line
+    with no part in it is not seen. A segment with no part inside is returned as it was,
+    marked outside.
     """
     h, w = shape
     seg = np.asarray(seg, dtype=np.float64)
