@@ -242,6 +242,20 @@ def clip_to_image(seg: np.ndarray, shape: Tuple[int, int]) -> Tuple[np.ndarray, 
     """
     h, w = shape
     seg = np.asarray(seg, dtype=np.float64)
+    xs, ys = seg[:, 0::2], seg[:, 1::2]
+    # most lines lie in the image: clip only those that reach past its border
+    over = ((xs.min(axis=1) < 0) | (xs.max(axis=1) > w - 1) | (ys.min(axis=1) < 0)
+            | (ys.max(axis=1) > h - 1))
+    inside = np.ones(seg.shape[0], dtype=bool)
+    if not over.any():
+        return seg.copy(), inside
+    out = seg.copy()
+    out[over], inside[over] = _clipped(seg[over], w, h)
+    return out, inside
+
+
+def _clipped(seg: np.ndarray, w: int, h: int) -> Tuple[np.ndarray, np.ndarray]:
+    """Return :func:`clip_to_image` of segments ``seg`` (T, 4) that reach past the border."""
     x0, y0 = seg[:, 0], seg[:, 1]
     dx, dy = seg[:, 2] - x0, seg[:, 3] - y0
     # the four half-planes p t <= q of the parametric segment, t in [0, 1]

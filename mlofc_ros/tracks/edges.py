@@ -152,9 +152,11 @@ def _normal_search(image: np.ndarray, pts: np.ndarray, nrm: np.ndarray, radius: 
         score += prefer_polarity * other
     np.putmask(score, ~peak, np.inf)
     j = np.argmin(score, axis=0)
+    valid = np.isfinite(score.min(axis=0))
     h, w = image.shape[:2]
     px, py = pts.reshape(2, n)
-    valid = np.isfinite(score.min(axis=0)) & (px >= 0) & (px <= w - 1) & (py >= 0) & (py <= h - 1)
+    if px.min() < 0 or px.max() > w - 1 or py.min() < 0 or py.max() > h - 1:
+        valid &= (px >= 0) & (px <= w - 1) & (py >= 0) & (py <= h - 1)
     # flat indices into g; the neighbours at j = 0 / kk - 1 are clipped (not used there)
     gf = g.ravel()
     at = j * n + np.arange(n)
