@@ -349,6 +349,18 @@ def test_clip_to_image():
     assert np.all((out[5, [1, 3]] >= 0) & (out[5, [1, 3]] <= 479))
 
 
+def test_edge_search_finds_nothing_outside_the_image():
+    """A line predicted past the border is not found on the border's replicated pixels."""
+    img = np.full((120, 160), 50.0, np.float32)
+    img[60:] = 200.0                                    # a horizontal edge across the image
+    seg = np.array([[-80.0, 59.5, -20.0, 59.5],         # wholly outside, on the edge's row
+                    [20.0, 59.5, 140.0, 59.5],          # inside
+                    [-60.0, 59.5, 60.0, 59.5]])         # half outside
+    _, support, _ = refine_lines(img, seg)
+    assert support[0] == 0.0 and support[1] == 1.0
+    assert 0.4 <= support[2] <= 0.6
+
+
 def test_lines_sliding_out_of_view_stay_in_the_image():
     """A band moving along its own edges: every reported segment stays inside the image."""
     h, w, step = 240, 320, 7

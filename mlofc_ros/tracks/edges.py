@@ -155,7 +155,7 @@ def _normal_search(image: np.ndarray, pts: np.ndarray, nrm: np.ndarray, radius: 
     valid = np.isfinite(score.min(axis=0))
     h, w = image.shape[:2]
     px, py = pts.reshape(2, n)
-    if px.min() < 0 or px.max() > w - 1 or py.min() < 0 or py.max() > h - 1:
+    if n and (px.min() < 0 or px.max() > w - 1 or py.min() < 0 or py.max() > h - 1):
         valid &= (px >= 0) & (px <= w - 1) & (py >= 0) & (py <= h - 1)
     # flat indices into g; the neighbours at j = 0 / kk - 1 are clipped (not used there)
     gf = g.ravel()
