@@ -158,14 +158,15 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--scenes', type=scene_list, default=['own2+bg', 'own3+bg'],
                    help='comma-separated scenes of bench spinning')
     p.add_argument('--seeds', default='0,1,2,3,4,5', help='render seeds')
-    p.add_argument('--methods', default='general,auto',
-                   help='comma-separated solver methods (the node default is auto)')
+    common.add_methods_option(p, 'general,auto')
     p.add_argument('--delays', default='0,1',
                    help='scales of the lane delays (0: every frame solved in turn, no lane)')
     p.add_argument('--frames', type=int, default=300, help='frames per run (300: 10 s)')
     p.add_argument('--jobs', type=int, default=2, help='worker processes')
     p.add_argument('--out', default=None, help='output folder (default docs/results/lane)')
-    return p.parse_args(list(argv))
+    args = p.parse_args(list(argv))
+    args.method_list = common.method_list(p, args)
+    return args
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -175,7 +176,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     t0 = time.monotonic()
     revision = common.commit()       # before the runs import the code
     items = [(scene, int(seed), float(scale), args.frames, method) for scene in args.scenes
-             for method in args.methods.split(',') if method
+             for method in args.method_list
              for scale in args.delays.split(',') if scale for seed in args.seeds.split(',')
              if seed]
     records = common.run_parallel(run_one, items, args.jobs, 'runs', reports=len(items))
@@ -183,7 +184,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "The node's solver lane replayed offline with fixed delays",
         common.command_line('lane', argv),
         {'Runs': f'{args.frames} frames 640x480 at 30 Hz per run, `method` '
-                 f'{args.methods.replace(",", ", ")}, window 10; '
+                 f'{", ".join(args.method_list)}, window 10; '
                  f'lane delays at x1 (frames): {DELAYS}',
          'Run time': f'{time.monotonic() - t0:.0f} s'}, revision)
     text = '\n'.join([head, '', '## Over the seeds', '',
