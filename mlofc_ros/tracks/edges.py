@@ -264,7 +264,6 @@ def grow_lines(image: np.ndarray, seg: np.ndarray, step: float = 2.0, n_steps: i
     t_n = seg.shape[0]
     if t_n == 0:
         return seg.astype(np.float64), np.zeros((0, 2))
-    h, w = image.shape[:2]
     s = seg.astype(np.float64)
     d = s[:, 2:] - s[:, :2]
     length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
@@ -275,10 +274,10 @@ def grow_lines(image: np.ndarray, seg: np.ndarray, step: float = 2.0, n_steps: i
     base = s.T.reshape(2, 2, t_n).transpose(1, 2, 0)                           # (2, T, 2)
     sgn = np.array([-1.0, 1.0])
     pts = base[..., None] + (sgn[:, None] * dist)[None, None] * u.T[:, :, None, None]
+    # a sample outside the image finds nothing (:func:`_normal_search`)
     off, found = _normal_search(image, pts.reshape(2, t_n, -1), u.T[::-1] * _ROT90, radius,
                                 min_gradient, min_relative)
     ok = (found & (np.abs(off) <= tol_px)).reshape(t_n, 2, n_steps)
-    ok &= (pts[0] >= 0) & (pts[0] <= w - 1) & (pts[1] >= 0) & (pts[1] <= h - 1)
     # consecutive supported samples from the end outwards
     run = np.where(ok.all(axis=2), n_steps, np.argmin(ok, axis=2))           # (T, 2)
     grown = step * run
