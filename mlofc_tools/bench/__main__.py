@@ -30,6 +30,7 @@ BENCHMARKS = {
     'step': 'one warm solver update of general against LSD alone, by number of lines',
     'soak': 'resident memory over a long run of the pipeline (10,000 frames)',
     'spinning': 'boxes spinning about their own centres through the pipeline: robust vs general',
+    'degraded': 'the default pipeline on blurred, noisy and compressed frames of spinning boxes',
     'real': 'visp_cube (real, no ground truth) scored by a motion proxy: robust vs general',
     'focal': 'the focal length estimated online without calibration: general vs robust',
     'count': 'the number of bodies found online: a line stream that changes, real video',
