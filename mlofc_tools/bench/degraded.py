@@ -147,7 +147,7 @@ SUMMARY_HEADERS = ['scene', 'condition', 'seeds', 'wrong % (mean)', 'wrong % (wo
 
 def plot(path, records: Sequence[Dict[str, object]]) -> None:
     """Bars per condition: mean wrong % (and the worst run) per scene; tracked 5 beside."""
-    fig, axes = common.new_figure(2, width_per_panel=7.0, height=4.2)
+    fig, axes = common.new_figure(2, width_per_panel=7.0, height=5.0)
     scenes = list(dict.fromkeys(r['scene'] for r in records))
     names = [c for c in CONDITIONS if any(r['condition'] == c for r in records)]
     width = 0.8 / max(len(scenes), 1)
@@ -172,6 +172,7 @@ def plot(path, records: Sequence[Dict[str, object]]) -> None:
         ax.set_xticks(x0)
         ax.set_xticklabels(names, rotation=35, ha='right', fontsize=8)
         ax.grid(True, axis='y', alpha=0.3)
+    fig.subplots_adjust(bottom=0.32)            # room for the conditions' slanted names
     common.save_figure(fig, path, legend_ax=axes[0])
 
 
