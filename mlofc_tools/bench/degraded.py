@@ -56,7 +56,7 @@ CONDITIONS: Dict[str, List[Tuple[str, float]]] = {
     'camera': [('blur', 0.8), ('noise', 3.0), ('jpeg', 80)],
 }
 
-#: The label goal of issue #39 (mean wrong %, worst run), for the report's reference lines.
+#: The label goal of issue #39 (mean wrong %, worst run), as the report states it.
 GOAL_WRONG_PCT, GOAL_WORST_PCT = 5.0, 10.0
 
 
@@ -80,6 +80,8 @@ def degrade(frames: Sequence[np.ndarray], steps: Sequence[Tuple[str, float]], se
                 img = np.clip(img + rng.normal(0.0, amount, img.shape), 0, 255).astype(np.uint8)
             elif kind == 'jpeg':
                 ok, buf = cv2.imencode('.jpg', img, [cv2.IMWRITE_JPEG_QUALITY, int(amount)])
+                if not ok:
+                    raise ValueError(f'cannot encode a {img.shape} {img.dtype} frame as JPEG')
                 img = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
             elif kind == 'motion':
                 img = cv2.filter2D(img, -1, np.full((1, int(amount)), 1.0 / int(amount)))
