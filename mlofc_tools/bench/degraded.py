@@ -16,9 +16,10 @@ Image quality: the default pipeline on blurred, noisy and compressed frames of s
 
 Run ``python -m mlofc_tools.bench degraded``; writes ``README.md`` and ``degraded.png`` to
 ``docs/results/degraded/``. The rendered scenes of ``bench spinning`` (boxes spinning about
-their own centres in front of a static wall: they translate relative to the camera; the
-renderer's frames are sharp, with sensor noise of 2 grey levels) are degraded frame by frame
-as a real camera and its transport degrade them, and go through
+their own centres in front of a static wall: they translate relative to the camera; and, as
+the control where the rotation model holds and the default keeps it, boxes rotating about the
+camera; the renderer's frames are sharp, with sensor noise of 2 grey levels) are degraded
+frame by frame as a real camera and its transport degrade them, and go through
 :class:`~mlofc_ros.pipeline.Pipeline` with its default parameters (``num_bodies`` the scene's):
 
 - ``Gaussian blur s px``: defocus, ``cv2.GaussianBlur`` with sigma ``s``;
@@ -182,8 +183,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     from mlofc_tools.bench.spinning import scene_list
     p = argparse.ArgumentParser(prog='python -m mlofc_tools.bench degraded',
                                 description=__doc__.split('\n')[1])
-    p.add_argument('--scenes', type=scene_list, default=['own2+bg', 'own3+bg'],
-                   help='comma-separated scenes of bench spinning (default own2+bg,own3+bg)')
+    p.add_argument('--scenes', type=scene_list, default=['own2+bg', 'own3+bg', 'cam2+bg'],
+                   help='comma-separated scenes of bench spinning (default own2+bg,own3+bg,'
+                        'cam2+bg)')
     p.add_argument('--conditions', default=','.join(CONDITIONS),
                    help=f'comma-separated conditions from {list(CONDITIONS)}')
     p.add_argument('--seeds', default='0,1,2,3', help='comma-separated render seeds')
