@@ -174,6 +174,11 @@ def method_list(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Li
     return methods
 
 
+def percent(x: float) -> float:
+    """Return the share ``x`` (a fraction) in %, NaN for a share that is not finite."""
+    return 100.0 * x if math.isfinite(x) else math.nan
+
+
 def format_number(x: object, digits: int = 3) -> str:
     """Format a table cell: floats with ``digits`` significant digits, NaN as an em dash."""
     if isinstance(x, (float, np.floating)):

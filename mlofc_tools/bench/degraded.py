@@ -36,7 +36,6 @@ the pipeline's own tracks as ``bench frontend`` scores the tracker's (tracked 5,
 precision: the share of reported segments on some true edge, segments per frame).
 """
 import argparse
-import math
 import time
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
@@ -116,10 +115,6 @@ def run_one(item: Tuple[str, str, int, int]) -> Dict[str, object]:
     return {'scene': scene, 'condition': condition, 'seed': seed, 'score': score}
 
 
-def _pct(x: float) -> float:
-    return 100.0 * x if math.isfinite(x) else math.nan
-
-
 def summary_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
     """One row per (scene, condition) over its seeds, in :data:`CONDITIONS` order."""
     groups: Dict[Tuple[str, str], List[Dict[str, object]]] = {}
@@ -131,9 +126,9 @@ def summary_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
         scores = groups[(scene, condition)]
         err = np.concatenate([s['omega_err'][np.isfinite(s['omega_err'])] for s in scores])
         rows.append([scene, condition, len(scores),
-                     _pct(float(np.mean([s['wrong'] for s in scores]))),
-                     _pct(float(max(s['wrong'] for s in scores))),
-                     _pct(float(np.mean([s['unassigned'] for s in scores]))),
+                     common.percent(float(np.mean([s['wrong'] for s in scores]))),
+                     common.percent(float(max(s['wrong'] for s in scores))),
+                     common.percent(float(np.mean([s['unassigned'] for s in scores]))),
                      f'{int(np.sum(err <= 0.10))} of {err.size}' if err.size else '—',
                      f'{100 * np.max(err):.0f}' if err.size else '—',
                      float(np.mean([s['tracked_5'] for s in scores])),

@@ -282,10 +282,6 @@ def score_run(results: Dict[int, Any], moving_px: float, proxy: str = 'normal',
     return out
 
 
-def _pct(x: float) -> float:
-    return 100.0 * x if math.isfinite(x) else math.nan
-
-
 def _mean(values: Sequence[float]) -> float:
     v = np.asarray(values, dtype=np.float64)
     v = v[np.isfinite(v)]
@@ -321,11 +317,11 @@ def summary_row(method: str, scores: Sequence[Dict[str, float]], phase_start: in
     both = [r and not s['still_other'] < GOAL_SEGMENTS for r, s in zip(right, phase)]
     lsd = _median(lsd_ms)
     return [method, f'{len(phase)} / {n_phase}', _median([s['moving'] for s in phase]),
-            _pct(_mean([s['on_body'] for s in phase])),
-            _pct(_mean([s['still_other'] for s in phase])), _pct(share),
+            common.percent(_mean([s['on_body'] for s in phase])),
+            common.percent(_mean([s['still_other'] for s in phase])), common.percent(share),
             '—' if math.isnan(share) else ('met' if share >= GOAL_FRAMES else 'NOT met'),
-            _pct(float(np.mean(both))) if both else math.nan,
-            _pct(_mean([s['unlabelled'] for s in phase])), _median(before),
+            common.percent(float(np.mean(both))) if both else math.nan,
+            common.percent(_mean([s['unlabelled'] for s in phase])), _median(before),
             _median(ms), _mean(ms), lsd, _mean(ms) / lsd if lsd > 0 else math.nan]
 
 
@@ -346,8 +342,8 @@ def frame_rows(method: str, scores: Sequence[Dict[str, float]], phase_start: int
         One row every this many frames.
 
     """
-    return [[s['frame'], method, s['moving'], _pct(s['on_body']), _pct(s['unlabelled']),
-             s['still'], _pct(s['still_other'])]
+    return [[s['frame'], method, s['moving'], common.percent(s['on_body']),
+             common.percent(s['unlabelled']), s['still'], common.percent(s['still_other'])]
             for s in scores if s['frame'] >= phase_start
             and (s['frame'] - phase_start) % every == 0]
 

@@ -205,10 +205,6 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     return args
 
 
-def _pct(x: float) -> float:
-    return 100.0 * x if math.isfinite(x) else math.nan
-
-
 def build_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
     """One table row per record: scene, seed, method, window, scores."""
     rows = []
@@ -216,8 +212,8 @@ def build_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
         s = r['score']
         boxes = np.isfinite(s['omega_err'])
         ms = s['ms']
-        rows.append([r['scene'], r['seed'], r['method'], r['window'], _pct(s['wrong']),
-                     _pct(s['wrong_frame']), _pct(s['unassigned']),
+        rows.append([r['scene'], r['seed'], r['method'], r['window'], common.percent(s['wrong']),
+                     common.percent(s['wrong_frame']), common.percent(s['unassigned']),
                      ' / '.join(f'{100 * x:.0f}' for x in s['omega_err'][boxes]) or '—',
                      ' / '.join('—' if math.isnan(x) else f'{100 * x:.0f}'
                                 for x in s['los_err'][boxes]) or '—',
@@ -243,10 +239,10 @@ def summary_rows(records: Sequence[Dict[str, object]]) -> List[List[object]]:
     for (scene, method, window), scores in groups.items():
         err = np.concatenate([s['omega_err'][np.isfinite(s['omega_err'])] for s in scores])
         rows.append([scene, method, window, len(scores),
-                     _pct(float(np.mean([s['wrong'] for s in scores]))),
-                     _pct(float(max(s['wrong'] for s in scores))),
-                     _pct(float(np.mean([s['wrong_frame'] for s in scores]))),
-                     _pct(float(np.mean([s['unassigned'] for s in scores]))),
+                     common.percent(float(np.mean([s['wrong'] for s in scores]))),
+                     common.percent(float(max(s['wrong'] for s in scores))),
+                     common.percent(float(np.mean([s['wrong_frame'] for s in scores]))),
+                     common.percent(float(np.mean([s['unassigned'] for s in scores]))),
                      f'{100 * np.median(err):.0f}' if err.size else '—',
                      f'{np.mean(err <= 0.05):.2f}' if err.size else '—',
                      float(np.median(np.concatenate([s['ms'] for s in scores]))),
