@@ -327,6 +327,44 @@ def test_split_and_merge_moves_repair_two_objects_merged_and_one_split(monkeypat
     assert stuck['score'] > sol['score']
 
 
+def still_lines(seed, n_lines=40, w=np.zeros(3), n_frames=10, noise=0.05):
+    """Return noisy tracks of lines 7-10 units away turning ``w`` per frame about the camera."""
+    rng = np.random.default_rng(seed)
+    P = np.c_[rng.uniform(-4, 4, (n_lines, 2, 2)), rng.uniform(7, 10, (n_lines, 2, 1))]
+    tracks = np.empty((n_lines, n_frames, 4))
+    for k in range(n_frames):
+        q = P @ np.linalg.matrix_power(rotation_matrix(w), k).T @ KMAT.T
+        tracks[:, k] = (q[..., :2] / q[..., 2:]).reshape(n_lines, 4)
+    return tracks + rng.normal(scale=noise, size=tracks.shape)
+
+
+@pytest.mark.parametrize('camera', [np.zeros(3), np.deg2rad([0.4, -0.8, 0.3])])
+def test_the_background_start_takes_the_still_lines_and_splits_the_rest_by_place(camera):
+    # a still camera (the lines that stand still) or a turning one (the lines that turn with
+    # a rotation-only body): the background; two boxes spinning at two places, by place
+    boxes = [small_spinning_body(s, centre=c, noise=0.05)[0]
+             for s, c in ((5, (-1.2, -0.6, 6.0)), (8, (1.2, 0.7, 6.5)))]
+    tracks = np.concatenate([still_lines(3, w=camera)] + boxes)
+    obs = LineObservations(tracks, (F, F, C, C))
+    candidates = np.array([np.zeros(3), camera, [0.02, 0.0, 0.0]])
+    labels = search.background_labels(obs, 3, candidates, 0.05 ** 2, np.random.default_rng(0))
+    assert np.all(labels[:40] == 0)
+    assert len(set(labels[40:65])) == 1 and len(set(labels[65:])) == 1
+    assert labels[40] != labels[65] and 0 not in (labels[40], labels[65])
+
+
+def test_the_search_starts_from_the_background_when_given_a_generator(monkeypatch):
+    tracks = np.concatenate([still_lines(3)] + [small_spinning_body(5, noise=0.05)[0]])
+    obs = LineObservations(tracks, (F, F, C, C))
+    seen = []
+    monkeypatch.setattr(search, 'marginal_segmentation',
+                        lambda obs, n, starts, *a, **k: seen.append([s[0] for s in starts]))
+    for rng in (None, np.random.default_rng(0)):
+        search.general_search(obs, 2, [('spatial', np.arange(65) % 2)], np.zeros(65, int),
+                              np.zeros((2, 3)), rng=rng)
+    assert seen == [['spatial'], ['spatial', 'background']]
+
+
 def test_batched_evaluations_and_lockstep_fits_match_single_ones():
     # the LM is sensitive to the last bit (its optimum is flat): a batch of motions or of runs
     # must give each what it gets alone (the evaluations bit for bit; the fits to rounding:

@@ -350,14 +350,15 @@ def _search(obs: LineObservations, rot: SegmentationResult, init_labels: Optiona
     """
     Find the bodies by the multi-start search.
 
-    Starts: the previous labels (when given), the rotation-only labels, a spatial clustering.
+    Starts: the previous labels (when given), the rotation-only labels, a spatial clustering
+    and the background start (:func:`.general.search.background_labels`).
     """
     n = rot.n_bodies
     starts = [('rotation-only', rot.labels), ('spatial', spatial_labels(obs.midpoints, n, rng))]
     if init_labels is not None:
         starts.insert(0, ('previous', np.asarray(init_labels)))
     return general_search(obs, n, starts, rot.labels, rot.angular_velocities, neighbours,
-                          points=obs.midpoints)
+                          points=obs.midpoints, rng=rng)
 
 
 def _refit_bodies(obs: LineObservations, sol: dict, sigma2: float, rescan: np.ndarray) -> None:

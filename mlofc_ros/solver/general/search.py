@@ -48,6 +48,25 @@ def spatial_labels(mid: np.ndarray, n: int, rng: np.random.Generator,
     return labels
 
 
+def background_labels(obs: LineObservations, n: int, W: np.ndarray, sigma2: float,
+                      rng: np.random.Generator, p: float = 0.99) -> np.ndarray:
+    """
+    Return labels ``(N,)``: the tracks that a rotation of ``W (C, 3)`` explains, the rest by place.
+
+    The candidate that explains the most tracks (within the chi-square bound at ``p`` of the
+    measured noise ``sigma2`` px^2, no translation) is body 0, the background; the others are
+    clustered by their midpoints (:func:`spatial_labels`) into bodies 1 to ``n - 1``.
+    """
+    dof = np.maximum(2.0 * obs.frames - 2.0, 1.0)
+    costs = general_costs(obs, W, np.zeros_like(W))
+    inside = np.nan_to_num(costs, nan=np.inf) <= chi2_quantile(p, dof)[:, None] * sigma2
+    still = inside[:, np.argmax(inside.sum(axis=0))]
+    labels = np.zeros(obs.n_tracks, dtype=np.int64)
+    if n > 1 and np.count_nonzero(~still) >= n - 1:
+        labels[~still] = 1 + spatial_labels(obs.midpoints[~still], n - 1, rng)
+    return labels
+
+
 #: Smallest endpoint noise assumed (px): the non-linear fits converge to ~1e-9, not to zero,
 #: and no detector locates lines better than this.
 SIGMA_FLOOR_PX = 0.1
@@ -409,7 +428,8 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
                    w_rot: np.ndarray, neighbours: Optional[np.ndarray] = None,
                    noise_factor: float = NOISE_FACTOR, outlier_p: float = 0.9999,
                    points: Optional[np.ndarray] = None,
-                   position_weight: float = POSITION_WEIGHT) -> dict:
+                   position_weight: float = POSITION_WEIGHT,
+                   rng: Optional[np.random.Generator] = None) -> dict:
     """
     Search the 'general' method's labels: noise level, then :func:`marginal_segmentation`.
 
@@ -437,6 +457,10 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
         Track midpoints (px) for the bodies' position term (:func:`position_costs`).
     position_weight : float
         Weight of the position term (:data:`POSITION_WEIGHT`).
+    rng : numpy.random.Generator, optional
+        Given: one more start, :func:`background_labels` at the measured noise (the lines
+        that stand still, or turn with one of ``w_rot``, one body; the others split by place
+        with ``rng``). None: ``starts`` only.
 
     Returns
     -------
@@ -448,7 +472,12 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
     W, T = np.array(w_rot, dtype=float), np.zeros((n, 3))
     lab = np.where(dof > 0, np.asarray(rot_labels, dtype=np.int64), -1)
     _fit_each_body(obs, lab, W, T, np.zeros(n, dtype=bool), 6, lambda b: w_rot[b])
-    sigma2 = noise_factor * measured_noise(obs, W, T)
+    measured = measured_noise(obs, W, T)
+    if rng is not None:
+        still = np.concatenate([np.zeros((1, 3)), np.asarray(w_rot, dtype=float)])
+        starts = list(starts) + [('background',
+                                  background_labels(obs, n, still, measured, rng))]
+    sigma2 = noise_factor * measured
     return marginal_segmentation(obs, n, starts, W, T, sigma2, outlier_p=outlier_p,
                                  neighbours=neighbours, points=points,
                                  position_weight=position_weight)
