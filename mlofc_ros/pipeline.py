@@ -1012,6 +1012,8 @@ class Pipeline:
                         init_motions=result_motions(result), rescan=list(range(result.n_bodies)))
         lane.submit(SolveJob(job.obs, keywords, job.generation, polish=job.polish + 1,
                              before=result))
+        # meanwhile the frames carry its labels, not the older ones of the rotation model
+        self._publish(job.obs, result, problems, interim=True)
         return None
 
     def _adopt(self, finished: Finished, problems: List[str]) -> bool:
@@ -1041,14 +1043,17 @@ class Pipeline:
         self._publish(job.obs, result, [])
         return True
 
-    def _publish(self, obs: Observation, res: SegmentationResult, problems: List[str]
-                 ) -> Dict[str, Any]:
+    def _publish(self, obs: Observation, res: SegmentationResult, problems: List[str],
+                 interim: bool = False) -> Dict[str, Any]:
         """
         Return the per-segment and per-body fields of a solved frame, by stable body id.
 
         Rotations in rad/s (the window's median frame interval); the body ids follow the
         motions the labels were made with (``segmentation_angular_velocities``), the published
-        ones may be a refit of them.
+        ones may be a refit of them. ``interim``: an answer that another will replace (a
+        search's, while the lane polishes it): its labels become the running fit's, for the
+        frames answered from it meanwhile, but its motions are no warm start, its labels no
+        vote and its window no evidence of the focal length.
         """
         interval = obs.frame_interval
         published = np.asarray(res.angular_velocities, dtype=float).reshape(-1, 3) / interval
@@ -1092,9 +1097,10 @@ class Pipeline:
         cov = cov + self._warm.carried_spreads(res, mapping) / interval ** 2
         c_out[mapping] = cov + focal_covariance(published, focal_log_sigma)
         v_out[mapping] = valid
-        self._warm.remember(res, mapping, valid)
+        if not interim:
+            self._warm.remember(res, mapping, valid)
         stable = relabel(res.labels, mapping)
-        if self._votes is not None:
+        if self._votes is not None and not interim:
             stable = self._voted(obs, stable)
         labels, carried = self._segment_labels(obs, stable)
         if alike:
@@ -1111,7 +1117,8 @@ class Pipeline:
                                         len(mapping))]] = False
         self._running = RunningFit(obs.epoch, np.array(obs.track_ids), labels,
                                    float(res.focal_length), focal_log_sigma, n_out)
-        self._refine_focal(obs, res, problems)
+        if not interim:
+            self._refine_focal(obs, res, problems)
         residuals = lookup(obs.track_ids, obs.win_ids,
                            np.asarray(res.residuals, dtype=np.float32), np.nan)
         return {'labels': labels, 'residuals': residuals.astype(np.float32),

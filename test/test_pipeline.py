@@ -991,6 +991,26 @@ def test_a_lane_runs_the_full_solves_while_the_frames_step():
         _assert_bodies_right(r, truth, omegas)
 
 
+def test_while_a_search_is_polished_the_frames_carry_its_labels():
+    # the search's answer goes back to the lane to be polished; the frames until the polished
+    # one is back carry the search's labels (no twist, no step from its motions yet)
+    p, lane, feed, truth, _ = _beside_lane(30, 4)
+    jobs = []
+    real_submit = lane.submit
+    lane.submit = lambda job: jobs.append(job) or real_submit(job)
+    results = [feed(k) for k in range(30)]
+    first = 10 - 1
+    polishes = [job for job in jobs if job.polish]
+    assert polishes
+    interim = results[first + 5:first + 5 * (len(polishes) + 1)]
+    for r in interim:
+        assert r.from_running_fit and not r.body_valid.any()
+        assert np.all(r.labels >= 0)
+        for s in (0, 1):
+            g = int(np.bincount(truth[r.labels == s]).argmax())
+            assert np.count_nonzero((r.labels == s) & (truth != g)) <= 2
+
+
 def _assert_bodies_right(r, truth, omegas):
     """Assert each body of ``r`` at most 2 lines wrong and within 5% of its true omega."""
     for s in range(len(omegas)):
