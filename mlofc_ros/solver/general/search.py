@@ -474,9 +474,10 @@ def general_search(obs: LineObservations, n: int, starts: list, rot_labels: np.n
     _fit_each_body(obs, lab, W, T, np.zeros(n, dtype=bool), 6, lambda b: w_rot[b])
     measured = measured_noise(obs, W, T)
     if rng is not None:
-        still = np.concatenate([np.zeros((1, 3)), np.asarray(w_rot, dtype=float)])
+        # the background's candidates: no motion (a still camera), each rotation-only body's
+        candidates = np.concatenate([np.zeros((1, 3)), np.asarray(w_rot, dtype=float)])
         starts = list(starts) + [('background',
-                                  background_labels(obs, n, still, measured, rng))]
+                                  background_labels(obs, n, candidates, measured, rng))]
     sigma2 = noise_factor * measured
     return marginal_segmentation(obs, n, starts, W, T, sigma2, outlier_p=outlier_p,
                                  neighbours=neighbours, points=points,
