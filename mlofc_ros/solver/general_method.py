@@ -30,9 +30,10 @@ from typing import Mapping, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from .general import (assign_bodies, assign_fitted, basin_spread, body_covariances, fit_bodies,
-                      fit_bodies_multistart, fit_body, fit_body_multistart, general_search,
-                      general_warm, LineObservations, marginal_segmentation, measured_noise,
+from .general import (assign_bodies, assign_fitted, background_labels, basin_spread,
+                      body_covariances, fit_bodies, fit_bodies_multistart, fit_body,
+                      fit_body_multistart, fitted_start, general_search, general_warm,
+                      LineObservations, marginal_segmentation, measured_noise,
                       NOISE_FACTOR, polish_bodies, rescale_translations, spatial_labels,
                       WARM_INLIERS)
 from .ksubspaces import total_cost
@@ -104,6 +105,13 @@ STEP_ITERATIONS = 2
 #: taken (the tracked solve runs): bodies do not trade many tracks from one frame to the next.
 STEP_MOVES = 0.1
 
+#: A tracked solve also starts from the background start (:func:`_track`) when it moves
+#: more than this share of the labelled tracks to another body: a regrouping the warm starts
+#: cannot reach. On bench spinning's own3+bg the start moved 2-8% of the tracks in most
+#: windows of runs whose bodies were right (37-45% in a few: the boxes clustered otherwise),
+#: 18-57% in a run that had a box split over the background and another body.
+REGROUPED = 0.1
+
 #: LM iterations of the pivot search of a body rescanned in a tracking step.
 RESCAN_ITERATIONS = 10
 
@@ -164,7 +172,8 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
         if step_only:
             raise StepNotTaken('the tracked bodies no longer explain the window', motions)
     if warm:
-        tracked = _track(obs, rot, init_labels, init_motions, neighbours)
+        tracked = _track(obs, rot, init_labels, init_motions, neighbours,
+                         np.random.default_rng(problem.seed))
     if tracked is None:
         sol = _search(obs, rot, init_labels, neighbours, np.random.default_rng(problem.seed))
         sigma2 = sol['sigma2'] / NOISE_FACTOR
@@ -181,8 +190,8 @@ def solve_general(problem: Problem, init_labels: Optional[np.ndarray] = None,
 
 
 def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarray,
-           init_motions: Tuple[np.ndarray, np.ndarray], neighbours: np.ndarray
-           ) -> Optional[_Tracked]:
+           init_motions: Tuple[np.ndarray, np.ndarray], neighbours: np.ndarray,
+           rng: np.random.Generator) -> Optional[_Tracked]:
     """
     Track the previous window's bodies; None when they no longer explain the window.
 
@@ -200,7 +209,14 @@ def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarr
     CPU per frame). Each body is a blob in the image too (:data:`WARM_POSITION_WEIGHT`). The
     LM refit from the previous motions still measures the noise of the final refit and the
     rescan when it fits better: at a motion from a wrong basin the noise would be inflated and
-    the rescan could not leave it.
+    the rescan could not leave it. A third start, the search's background start with its
+    bodies fitted as rescans (:func:`.general.fitted_start`), competes when it regroups more
+    than :data:`REGROUPED` of the labelled tracks: both warm starts keep a box whose lines
+    the previous bodies split (half on the background, half on a body fitted as nearly
+    still), and its rescans, on lines a quarter of which are the wall's, keep that body's
+    wrong basin (bench degraded's sharp own3+bg, render seed 3: a box 103% off to the end of
+    the run, 19.7% of the segments wrong; with the start 1.5%, every box within 1% of its
+    omega from frame 17).
     """
     w0, t0 = init_motions
     known = np.all(np.isfinite(w0), axis=1) & np.all(np.isfinite(t0), axis=1)
@@ -216,11 +232,40 @@ def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarr
     T = np.where(known[:, None], t0, warm['T'])
     prev = np.asarray(init_labels)
     starts = [('warm', np.where(prev >= 0, prev, warm['labels'])), ('warm', warm['labels'])]
+    # the search's background start, numbered as the previous bodies, when it regroups the
+    # tracks (the warm starts cannot): a box whose lines the previous bodies split comes back
+    # whole; its bodies fitted as rescans
+    candidates = np.concatenate([np.zeros((1, 3)), w0[known]])
+    background = background_labels(obs, rot.n_bodies, candidates, warm['sigma2'], rng)
+    background = _numbered_after(background, prev, rot.n_bodies)[background]
+    both = (prev >= 0) & (obs.frames >= MODEL_FRAMES)
+    if np.count_nonzero(background[both] != prev[both]) > REGROUPED * np.count_nonzero(both):
+        starts.append(('warm', background) + fitted_start(
+            obs, background, rot.n_bodies, warm['sigma2'], NOISE_FACTOR * warm['sigma2']))
     sol = marginal_segmentation(obs, rot.n_bodies, starts, W, T, NOISE_FACTOR * warm['sigma2'],
                                 rounds=2, iterations=4, neighbours=neighbours, keep=1,
                                 first_iterations=4, pivots=False, points=obs.midpoints,
                                 position_weight=WARM_POSITION_WEIGHT)
     return _Tracked(sol, refit_sigma2)
+
+
+def _numbered_after(labels: np.ndarray, prev: np.ndarray, n: int) -> np.ndarray:
+    """
+    Return the body ``(n,)`` in ``prev`` each body of ``labels`` shares most tracks with.
+
+    ``labels``, ``prev (N,)``: bodies ``0..n-1`` (``-1`` none). Greedy, the largest overlap
+    first; a permutation of ``0..n-1`` (bodies that share no tracks take the ids left), so
+    that a start from other labels keeps the previous window's body numbers.
+    """
+    both = (labels >= 0) & (prev >= 0)
+    overlap = np.zeros((n, n))
+    np.add.at(overlap, (labels[both], prev[both]), 1.0)
+    order = np.full(n, -1)
+    for _ in range(n):                                               # bodies, not lines
+        i, j = np.unravel_index(int(np.argmax(overlap)), overlap.shape)
+        order[i] = j
+        overlap[i, :], overlap[:, j] = -1.0, -1.0
+    return order
 
 
 def _step(obs: LineObservations, diagnostics: Diagnostics, focal_length: float,

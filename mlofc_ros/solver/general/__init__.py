@@ -33,20 +33,21 @@ from .model import (general_costs, Intrinsics, line_residuals, LineObservations,
                     marginal_costs, marginal_residuals)
 # the oracles of bench hopkins run the search's own steps
 from .search import _best_costs, _fit_each_body, _robust_sigma2  # noqa: F401
-from .search import (assign_bodies, assign_fitted, general_search, general_warm,
-                     marginal_segmentation, measured_noise, NOISE_FACTOR, position_costs,
-                     POSITION_PRIOR, POSITION_WEIGHT, SIGMA_FLOOR_PX, spatial_labels,
-                     WARM_INLIERS)
+from .search import (assign_bodies, assign_fitted, background_labels, fitted_start,
+                     general_search, general_warm, marginal_segmentation, measured_noise,
+                     NOISE_FACTOR, position_costs, POSITION_PRIOR, POSITION_WEIGHT,
+                     SIGMA_FLOOR_PX, spatial_labels, WARM_INLIERS)
 from .starts import (fit_bodies_multistart, fit_body_multistart, necker_mirror, PIVOT_KEEP,
                      pivot_picks, PIVOT_RATES, pivot_starts, PIVOT_W, polish_bodies,
                      polish_body, T_SCALES, T_STARTS)
 
-__all__ = ['assign_bodies', 'assign_fitted', 'basin_spread', 'body_covariance', 'body_covariances',
-           'fit_bodies', 'fit_bodies_multistart', 'fit_body', 'fit_body_multistart',
-           'general_costs', 'general_search', 'general_warm', 'Intrinsics', 'line_residuals',
-           'LineObservations', 'marginal_costs', 'marginal_residuals', 'marginal_segmentation',
-           'measured_noise', 'necker_mirror', 'NOISE_FACTOR', 'PIVOT_KEEP', 'pivot_picks',
-           'PIVOT_RATES', 'pivot_starts', 'PIVOT_W', 'polish_bodies', 'polish_body',
-           'position_costs', 'POSITION_PRIOR', 'POSITION_WEIGHT', 'RESCALES',
-           'rescale_translation', 'rescale_translations', 'ROBUST_SCALE', 'robust_scale',
-           'SIGMA_FLOOR_PX', 'spatial_labels', 'T_SCALES', 'T_STARTS', 'WARM_INLIERS']
+__all__ = ['assign_bodies', 'assign_fitted', 'background_labels', 'basin_spread',
+           'body_covariance', 'body_covariances', 'fit_bodies', 'fit_bodies_multistart',
+           'fit_body', 'fit_body_multistart', 'fitted_start', 'general_costs', 'general_search',
+           'general_warm', 'Intrinsics', 'line_residuals', 'LineObservations', 'marginal_costs',
+           'marginal_residuals', 'marginal_segmentation', 'measured_noise', 'necker_mirror',
+           'NOISE_FACTOR', 'PIVOT_KEEP', 'pivot_picks', 'PIVOT_RATES', 'pivot_starts', 'PIVOT_W',
+           'polish_bodies', 'polish_body', 'position_costs', 'POSITION_PRIOR', 'POSITION_WEIGHT',
+           'RESCALES', 'rescale_translation', 'rescale_translations', 'ROBUST_SCALE',
+           'robust_scale', 'SIGMA_FLOOR_PX', 'spatial_labels', 'T_SCALES', 'T_STARTS',
+           'WARM_INLIERS']

@@ -27,7 +27,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from .fit import best_fits
+from .fit import best_fits, rescale_translations
 from .model import general_costs, LineObservations, marginal_costs
 from .starts import fit_bodies_multistart
 from ..ksubspaces import assign, total_cost
@@ -65,6 +65,35 @@ def background_labels(obs: LineObservations, n: int, W: np.ndarray, sigma2: floa
     if n > 1 and np.count_nonzero(~still) >= n - 1:
         labels[~still] = 1 + spatial_labels(obs.midpoints[~still], n - 1, rng)
     return labels
+
+
+def fitted_start(obs: LineObservations, labels: np.ndarray, n: int, measured: float,
+                 sigma2: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return motions ``W, T (n, 3)`` for a start's ``labels (N,)`` and the bodies fitted.
+
+    Every body of at least 3 tracks is fitted as a rescan fits it (the pivot starts, at the
+    measured noise ``measured`` px^2 on the robust cost: at the segmentation's inflated
+    noise a box's first fit from its own lines often ends in a wrong basin), its translation
+    then rescaled to the segmentation's noise ``sigma2`` (:func:`.fit.rescale_translations`);
+    ``fitted (n,)`` marks them (the start's others have no motion).
+    """
+    usable = obs.frames >= 3
+    members = [np.flatnonzero(usable & (labels == b)) for b in range(n)]   # bodies, not lines
+    fitted = np.array([idx.size >= 3 for idx in members])
+    W, T = np.zeros((n, 3)), np.zeros((n, 3))
+    some = np.flatnonzero(fitted)
+    if some.size:
+        idx = [members[b] for b in some]
+        w, t, _ = fit_bodies_multistart(obs, idx, np.zeros((some.size, 3)), None,
+                                        FITTED_START_ITERATIONS, 1, measured,
+                                        robust=measured, per_rate=True)
+        W[some], T[some] = w, rescale_translations(obs, idx, w, t, sigma2)
+    return W, T, fitted
+
+
+#: LM iterations of the fits of :func:`fitted_start`'s bodies (a rescan's).
+FITTED_START_ITERATIONS = 10
 
 
 #: Smallest endpoint noise assumed (px): the non-linear fits converge to ~1e-9, not to zero,
@@ -269,8 +298,8 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
         The window's line tracks.
     n : int
         Number of bodies.
-    starts : list of (name, labels (N,))
-        Initial labellings.
+    starts : list of (name, labels (N,)) or (name, labels, W, T, fitted (n,) bool)
+        Initial labellings; with motions, the ``fitted`` bodies refine theirs.
     W0, T0 : (n, 3)
         Rotation (rad/frame) and translation (direction; its length is rescanned) to start
         every body's first fit from (:func:`.fit_body_multistart`).
@@ -307,10 +336,12 @@ def marginal_segmentation(obs: LineObservations, n: int, starts: list, W0: np.nd
                  'neighbours': neighbours, 'keep': keep, 'first_iterations': first_iterations,
                  'pivots': pivots, 'points': points, 'position_weight': position_weight}
     best = None
-    for name, lab in starts:
+    for name, lab, *motions in starts:
         lab = np.where(usable, np.asarray(lab, dtype=np.int64), -1)
-        sol = _fit_assign(obs, lab, np.array(W0, dtype=float), np.array(T0, dtype=float),
-                          np.zeros(n, dtype=bool), sigma2, name, **rounds_kw)
+        # a start with its motions (W, T, fitted) refines them; the others search from W0, T0
+        W, T, fitted = motions if motions else (W0, T0, np.zeros(n, dtype=bool))
+        sol = _fit_assign(obs, lab, np.array(W, dtype=float), np.array(T, dtype=float),
+                          np.array(fitted, dtype=bool), sigma2, name, **rounds_kw)
         if best is None or sol['score'] < best['score']:
             best = sol
     # a move keeps the start's name: a tracked solve whose grouping a move repaired is still a
