@@ -394,6 +394,27 @@ def test_a_tracked_solve_finds_a_box_whose_lines_the_bodies_split_again():
     assert np.linalg.norm(res.angular_velocities[b] - w_b) < 0.1 * np.linalg.norm(w_b)
 
 
+def test_a_tracked_solve_fits_the_background_start_only_when_it_regroups(monkeypatch):
+    # the start costs a rescan of every body: where it would keep the bodies' grouping, none
+    from mlofc_ros.solver import general_method
+    boxes = [small_spinning_body(s, centre=c, noise=0.1)[0] for s, c in
+             ((5, (-1.2, -0.6, 6.0)), (8, (1.2, 0.7, 6.5)))]
+    tracks = np.concatenate([still_lines(3, noise=0.1)] + boxes)
+    kw = {'intrinsics': (F, F, C, C), 'image_size': (1000, 1000), 'method': 'general'}
+    cold = segment_lines(tracks, 3, **kw)
+    fits = []
+    fitted_start = general_method.fitted_start
+    monkeypatch.setattr(general_method, 'fitted_start',
+                        lambda *a: fits.append(1) or fitted_start(*a))
+    segment_lines(tracks, 3, init_labels=cold.labels, init_motions=result_motions(cold), **kw)
+    assert fits == []
+    labels = cold.labels.copy()
+    # half the boxes' lines on the background
+    labels[40:90:2] = np.bincount(cold.labels[:40][cold.labels[:40] >= 0]).argmax()
+    segment_lines(tracks, 3, init_labels=labels, init_motions=result_motions(cold), **kw)
+    assert fits == [1]
+
+
 def test_the_search_starts_from_the_background_when_given_a_generator(monkeypatch):
     tracks = np.concatenate([still_lines(3)] + [small_spinning_body(5, noise=0.05)[0]])
     obs = LineObservations(tracks, (F, F, C, C))
