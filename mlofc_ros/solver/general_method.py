@@ -211,12 +211,12 @@ def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarr
     rescan when it fits better: at a motion from a wrong basin the noise would be inflated and
     the rescan could not leave it. A third start, the search's background start with its
     bodies fitted as rescans (:func:`.general.fitted_start`), competes when it regroups more
-    than :data:`REGROUPED` of the labelled tracks: both warm starts keep a box whose lines
-    the previous bodies split (half on the background, half on a body fitted as nearly
-    still), and its rescans, on lines a quarter of which are the wall's, keep that body's
-    wrong basin (bench degraded's sharp own3+bg, render seed 3: a box 103% off to the end of
-    the run, 19.7% of the segments wrong; with the start 1.5%, every box within 1% of its
-    omega from frame 17).
+    than :data:`REGROUPED` of the labelled tracks and every body has a motion: both warm
+    starts keep a box whose lines the previous bodies split (half on the background, half
+    on a body fitted as nearly still), and its rescans, on lines a quarter of which are the
+    wall's, keep that body's wrong basin (bench degraded's sharp own3+bg, render seed 3: a
+    box 103% off to the end of the run, 19.7% of the segments wrong; with the start 1.5%,
+    every box within 1% of its omega from frame 17).
     """
     w0, t0 = init_motions
     known = np.all(np.isfinite(w0), axis=1) & np.all(np.isfinite(t0), axis=1)
@@ -234,12 +234,15 @@ def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarr
     starts = [('warm', np.where(prev >= 0, prev, warm['labels'])), ('warm', warm['labels'])]
     # the search's background start, numbered as the previous bodies, when it regroups the
     # tracks (the warm starts cannot): a box whose lines the previous bodies split comes back
-    # whole; its bodies fitted as rescans
+    # whole; its bodies fitted as rescans. Not for a body without a motion (the automatic
+    # count's trial of one more body is a regrouping of its own: with the start beside it the
+    # count's stream of 'general' stayed at one body)
     candidates = np.concatenate([np.zeros((1, 3)), w0[known]])
     background = background_labels(obs, rot.n_bodies, candidates, warm['sigma2'], rng)
     background = _numbered_after(background, prev, rot.n_bodies)[background]
     both = (prev >= 0) & (obs.frames >= MODEL_FRAMES)
-    if np.count_nonzero(background[both] != prev[both]) > REGROUPED * np.count_nonzero(both):
+    if (np.all(known) and np.count_nonzero(background[both] != prev[both])
+            > REGROUPED * np.count_nonzero(both)):
         starts.append(('warm', background) + fitted_start(
             obs, background, rot.n_bodies, warm['sigma2'], NOISE_FACTOR * warm['sigma2']))
     sol = marginal_segmentation(obs, rot.n_bodies, starts, W, T, NOISE_FACTOR * warm['sigma2'],
