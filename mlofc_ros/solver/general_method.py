@@ -237,14 +237,14 @@ def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarr
     # whole; its bodies fitted as rescans. Not for a body without a motion (the automatic
     # count's trial of one more body is a regrouping of its own: with the start beside it the
     # count's stream of 'general' stayed at one body)
-    candidates = np.concatenate([np.zeros((1, 3)), w0[known]])
-    background = background_labels(obs, rot.n_bodies, candidates, warm['sigma2'], rng)
-    background = _numbered_after(background, prev, rot.n_bodies)[background]
-    both = (prev >= 0) & (obs.frames >= MODEL_FRAMES)
-    if (np.all(known) and np.count_nonzero(background[both] != prev[both])
-            > REGROUPED * np.count_nonzero(both)):
-        starts.append(('warm', background) + fitted_start(
-            obs, background, rot.n_bodies, warm['sigma2'], NOISE_FACTOR * warm['sigma2']))
+    if np.all(known):
+        candidates = np.concatenate([np.zeros((1, 3)), w0])
+        background = background_labels(obs, rot.n_bodies, candidates, warm['sigma2'], rng)
+        background = _numbered_after(background, prev, rot.n_bodies)[background]
+        both = (prev >= 0) & (obs.frames >= MODEL_FRAMES)
+        if np.count_nonzero(background[both] != prev[both]) > REGROUPED * np.count_nonzero(both):
+            starts.append(('warm', background) + fitted_start(
+                obs, background, rot.n_bodies, warm['sigma2'], NOISE_FACTOR * warm['sigma2']))
     sol = marginal_segmentation(obs, rot.n_bodies, starts, W, T, NOISE_FACTOR * warm['sigma2'],
                                 rounds=2, iterations=4, neighbours=neighbours, keep=1,
                                 first_iterations=4, pivots=False, points=obs.midpoints,
