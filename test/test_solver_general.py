@@ -354,15 +354,24 @@ def test_the_background_start_takes_the_still_lines_and_splits_the_rest_by_place
     assert labels[40] != labels[65] and 0 not in (labels[40], labels[65])
 
 
+def wall_and_two_boxes(seed=0):
+    """Return tracks of 40 still lines and two boxes of 25 spinning apart, the boxes' w."""
+    boxes = [small_spinning_body(s + seed, centre=c, noise=0.1)
+             for s, c in ((5, (-1.2, -0.6, 6.0)), (8, (1.2, 0.7, 6.5)))]
+    tracks = np.concatenate([still_lines(3 + seed, noise=0.1)] + [b[0] for b in boxes])
+    return tracks, [b[1] for b in boxes]
+
+
+#: segment_lines' keywords for :func:`wall_and_two_boxes` with the general model
+WALL_KW = {'intrinsics': (F, F, C, C), 'image_size': (1000, 1000), 'method': 'general'}
+
+
 @pytest.mark.parametrize('seed', [0, 3])
 def test_general_finds_two_boxes_spinning_in_front_of_a_still_background(seed):
     # the rotation-only and the spatial starts mix the background into the boxes here
     # (11 and 12% wrong without the background start)
-    boxes = [small_spinning_body(s + seed, centre=c, noise=0.1)[0]
-             for s, c in ((5, (-1.2, -0.6, 6.0)), (8, (1.2, 0.7, 6.5)))]
-    tracks = np.concatenate([still_lines(3 + seed, noise=0.1)] + boxes)
-    res = segment_lines(tracks, 3, intrinsics=(F, F, C, C), image_size=(1000, 1000),
-                        method='general')
+    tracks, _ = wall_and_two_boxes(seed)
+    res = segment_lines(tracks, 3, **WALL_KW)
     groups = np.split(res.labels, [40, 65])
     majority = [np.bincount(g[g >= 0], minlength=3).argmax() for g in groups]
     assert sorted(majority) == [0, 1, 2]
@@ -373,11 +382,8 @@ def test_a_tracked_solve_finds_a_box_whose_lines_the_bodies_split_again():
     # the previous window left box B half on the background and half on a body fitted as
     # nearly still; its lines fit that body, so only a start that regroups them finds B again
     # (the previous labels and motions alone keep it lost)
-    boxes = [small_spinning_body(s, centre=c, noise=0.1) for s, c in
-             ((5, (-1.2, -0.6, 6.0)), (8, (1.2, 0.7, 6.5)))]
-    tracks = np.concatenate([still_lines(3, noise=0.1)] + [b[0] for b in boxes])
-    kw = {'intrinsics': (F, F, C, C), 'image_size': (1000, 1000), 'method': 'general'}
-    cold = segment_lines(tracks, 3, **kw)
+    tracks, w_boxes = wall_and_two_boxes()
+    cold = segment_lines(tracks, 3, **WALL_KW)
     groups = np.split(np.arange(90), [40, 65])
     bg, a, b = (np.bincount(cold.labels[g][cold.labels[g] >= 0], minlength=3).argmax()
                 for g in groups)
@@ -387,31 +393,29 @@ def test_a_tracked_solve_finds_a_box_whose_lines_the_bodies_split_again():
     labels[groups[2][::2]] = bg
     labels[groups[2][1::2]] = b
     W[b], T[b] = [0.002, -0.001, 0.004], 0.01 * T[b] / np.linalg.norm(T[b])
-    res = segment_lines(tracks, 3, init_labels=labels, init_motions=(W, T), **kw)
+    res = segment_lines(tracks, 3, init_labels=labels, init_motions=(W, T), **WALL_KW)
     wrong = sum(np.count_nonzero(res.labels[g] != m) for g, m in zip(groups, (bg, a, b)))
     assert wrong <= 2
-    w_b = boxes[1][1]
+    w_b = w_boxes[1]
     assert np.linalg.norm(res.angular_velocities[b] - w_b) < 0.1 * np.linalg.norm(w_b)
 
 
 def test_a_tracked_solve_fits_the_background_start_only_when_it_regroups(monkeypatch):
     # the start costs a rescan of every body: where it would keep the bodies' grouping, none
     from mlofc_ros.solver import general_method
-    boxes = [small_spinning_body(s, centre=c, noise=0.1)[0] for s, c in
-             ((5, (-1.2, -0.6, 6.0)), (8, (1.2, 0.7, 6.5)))]
-    tracks = np.concatenate([still_lines(3, noise=0.1)] + boxes)
-    kw = {'intrinsics': (F, F, C, C), 'image_size': (1000, 1000), 'method': 'general'}
-    cold = segment_lines(tracks, 3, **kw)
+    tracks, _ = wall_and_two_boxes()
+    cold = segment_lines(tracks, 3, **WALL_KW)
     fits = []
     fitted_start = general_method.fitted_start
     monkeypatch.setattr(general_method, 'fitted_start',
                         lambda *a: fits.append(1) or fitted_start(*a))
-    segment_lines(tracks, 3, init_labels=cold.labels, init_motions=result_motions(cold), **kw)
+    segment_lines(tracks, 3, init_labels=cold.labels, init_motions=result_motions(cold),
+                  **WALL_KW)
     assert fits == []
     labels = cold.labels.copy()
     # half the boxes' lines on the background
     labels[40:90:2] = np.bincount(cold.labels[:40][cold.labels[:40] >= 0]).argmax()
-    segment_lines(tracks, 3, init_labels=labels, init_motions=result_motions(cold), **kw)
+    segment_lines(tracks, 3, init_labels=labels, init_motions=result_motions(cold), **WALL_KW)
     assert fits == [1]
 
 

@@ -244,7 +244,8 @@ def _track(obs: LineObservations, rot: SegmentationResult, init_labels: np.ndarr
         both = (prev >= 0) & (obs.frames >= MODEL_FRAMES)
         if np.count_nonzero(background[both] != prev[both]) > REGROUPED * np.count_nonzero(both):
             starts.append(('warm', background) + fitted_start(
-                obs, background, rot.n_bodies, warm['sigma2'], NOISE_FACTOR * warm['sigma2']))
+                obs, background, rot.n_bodies, warm['sigma2'], NOISE_FACTOR * warm['sigma2'],
+                RESCAN_ITERATIONS))
     sol = marginal_segmentation(obs, rot.n_bodies, starts, W, T, NOISE_FACTOR * warm['sigma2'],
                                 rounds=2, iterations=4, neighbours=neighbours, keep=1,
                                 first_iterations=4, pivots=False, points=obs.midpoints,

@@ -68,15 +68,16 @@ def background_labels(obs: LineObservations, n: int, W: np.ndarray, sigma2: floa
 
 
 def fitted_start(obs: LineObservations, labels: np.ndarray, n: int, measured: float,
-                 sigma2: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 sigma2: float, iterations: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Return motions ``W, T (n, 3)`` for a start's ``labels (N,)`` and the bodies fitted.
 
-    Every body of at least 3 tracks is fitted as a rescan fits it (the pivot starts, at the
-    measured noise ``measured`` px^2 on the robust cost: at the segmentation's inflated
-    noise a box's first fit from its own lines often ends in a wrong basin), its translation
-    then rescaled to the segmentation's noise ``sigma2`` (:func:`.fit.rescale_translations`);
-    ``fitted (n,)`` marks them (the start's others have no motion).
+    Every body of at least 3 tracks is fitted as a rescan fits it (``iterations`` LM
+    iterations from the pivot starts, at the measured noise ``measured`` px^2 on the robust
+    cost: at the segmentation's inflated noise a box's first fit from its own lines often
+    ends in a wrong basin), its translation then rescaled to the segmentation's noise
+    ``sigma2`` (:func:`.fit.rescale_translations`); ``fitted (n,)`` marks them (the start's
+    others have no motion).
     """
     usable = obs.frames >= 3
     members = [np.flatnonzero(usable & (labels == b)) for b in range(n)]   # bodies, not lines
@@ -86,14 +87,10 @@ def fitted_start(obs: LineObservations, labels: np.ndarray, n: int, measured: fl
     if some.size:
         idx = [members[b] for b in some]
         w, t, _ = fit_bodies_multistart(obs, idx, np.zeros((some.size, 3)), None,
-                                        FITTED_START_ITERATIONS, 1, measured,
-                                        robust=measured, per_rate=True)
+                                        iterations, 1, measured, robust=measured,
+                                        per_rate=True)
         W[some], T[some] = w, rescale_translations(obs, idx, w, t, sigma2)
     return W, T, fitted
-
-
-#: LM iterations of the fits of :func:`fitted_start`'s bodies (a rescan's).
-FITTED_START_ITERATIONS = 10
 
 
 #: Smallest endpoint noise assumed (px): the non-linear fits converge to ~1e-9, not to zero,
