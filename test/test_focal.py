@@ -18,6 +18,7 @@ import math
 from mlofc_ros.pipeline import focal_covariance
 from mlofc_ros.solver import segment_lines
 from mlofc_ros.solver.focal import (focal_evidence, FOCAL_OBSERVABLE, FOCAL_PRIOR_LOG_SIGMA,
+                                    FOCAL_WINDOW_INFORMATIVE,
                                     FocalEstimate, FocalEvidence, general_profiles)
 from mlofc_ros.solver.general import fit_bodies, LineObservations
 from mlofc_ros.solver.warm import result_motions
@@ -144,13 +145,27 @@ def test_translating_bodies_give_the_general_models_evidence():
                                          noise_var=noise).log_sigma)
         ev = focal_evidence(sc.tracks, res.labels, 2, CENTRE, 700.0, noise_var=noise,
                             motions=result_motions(res))
-        assert 0.0 < ev.log_sigma < 0.15
+        assert 0.0 < ev.log_sigma < FOCAL_WINDOW_INFORMATIVE      # it counts as a window's
         z.append(math.log(ev.focal / F_TRUE) / ev.log_sigma)
         # one body alone does not count (its profile can lean far off unchecked)
         alone = np.where(res.labels == 1, -1, res.labels)
         assert math.isinf(focal_evidence(sc.tracks, alone, 2, CENTRE, 700.0, noise_var=noise,
                                          motions=result_motions(res)).log_sigma)
     assert np.all(np.abs(z) < 3.0), z
+
+
+def test_a_window_solved_far_off_moves_towards_the_focal_length():
+    """The general model's profile goes on past its grid's edge: f beyond the span moves f."""
+    f0 = 250.0                            # the truth beyond f0 * FOCAL_EVIDENCE_SPAN
+    for seed in range(4):
+        sc = scene(seed, translation_ratio=5.0, rotation_deg=(2.0, 4.0))
+        res = segment_lines(sc.tracks, 2, intrinsics=(f0, f0) + CENTRE, image_size=SIZE,
+                            method='general', init_labels=sc.labels)
+        ev = focal_evidence(sc.tracks, res.labels, 2, CENTRE, f0,
+                            noise_var=res.diagnostics.sigma_px ** 2,
+                            motions=result_motions(res))
+        assert 1.4 * f0 < ev.focal < 1.1 * F_TRUE, (seed, ev)
+        assert ev.log_sigma < FOCAL_WINDOW_INFORMATIVE, (seed, ev)
 
 
 def test_the_estimate_needs_several_informative_windows():

@@ -181,7 +181,11 @@ FOCAL_MISFIT = 4.0
 #: Points of the coarse log grid over ``f0 / span .. f0 * span``.
 _GRID = 13
 #: LM steps of each general-model fit of a focal-length profile (:func:`general_profiles`).
-GENERAL_PROFILE_ITERATIONS = 8
+#: Fewer leave the motions near those fitted at the f the window was solved at, so the
+#: profile leans towards that f and is too sharp: bench focal's spinning boxes, render seeds
+#: 0-5, last f 8 steps +2 / +5 / -26 / -13 / -21 / -12 % (the last four 2.5-7 spreads
+#: off), 30 steps with the grid's extension -1 / -2 / -0 / -0 / -9 / -7 %.
+GENERAL_PROFILE_ITERATIONS = 30
 #: Points of the general model's log grid (each a lockstep LM run per body).
 _GENERAL_GRID = 9
 #: Usable tracks a body needs to give general-model evidence.
@@ -190,9 +194,9 @@ GENERAL_PROFILE_LINES = 8
 #: either end of the grid to give evidence.
 GENERAL_PROFILE_RISE = 9.0
 #: Factor on the variance of a general-model estimate: on bench focal's spinning boxes the
-#: windows' estimates scattered 4-5x the spread of their profiles (median |z| 4.1 over 40
-#: windows of five render seeds; the profile's minimum leans towards the f the window was
-#: solved at, whose labels and motions it starts from).
+#: windows' estimates scattered 3-5x the spread of their profiles (median |z| 3.0 over 25
+#: windows of six render seeds at :data:`GENERAL_PROFILE_ITERATIONS`, 4.1 with 8 steps; the
+#: labels and motions the profile starts from are the window's solve at its f).
 GENERAL_PROFILE_INFLATION = 25.0
 #: Bodies of a window that must give general-model estimates for any to count (pooled, their
 #: disagreement widens the spread): one body's profile alone can lean far off (visp_cube's
@@ -370,7 +374,8 @@ def _general_estimates(tracks: np.ndarray, labels: np.ndarray, bodies: Sequence[
 
     Of the bodies ``bodies`` (their motions ``motions = (W, T)`` at ``intrinsics``, whose
     ``fx`` is ``f``), each with at least :data:`GENERAL_PROFILE_LINES` usable tracks: its
-    profile (:func:`general_profiles`) on the log grid over ``f / span .. f * span``, a
+    profile (:func:`general_profiles`) on the log grid over ``f / span .. f * span``, the grid
+    continued once by half its points past an end where a body's minimum lies, a
     parabola through its minimum and the two grid points about it; a body whose profile
     rises less than :data:`GENERAL_PROFILE_RISE` times its noise at either end of the grid
     gives none (a profile that shallow is the LM's noise as much as the data's).
@@ -385,15 +390,29 @@ def _general_estimates(tracks: np.ndarray, labels: np.ndarray, bodies: Sequence[
     if len(used) < GENERAL_PROFILE_BODIES:          # too few to count: not worth the fits
         return [], []
     grid = np.linspace(-math.log(span), math.log(span), _GENERAL_GRID)
-    costs = general_profiles(tracks, [members[b] for b in used], intrinsics, W[used], T[used],
-                             np.exp(grid))
     h = grid[1] - grid[0]
+    runs = [members[b] for b in used]
+    costs = general_profiles(tracks, runs, intrinsics, W[used], T[used], np.exp(grid))
+    # a minimum at the grid's edge: the grid goes on past it once (the windows' profiles
+    # lean towards the f they were solved at, so a start far off stayed there)
+    edge = np.argmin(costs, axis=0)
+    more = _GENERAL_GRID // 2
+    if np.any(edge == _GENERAL_GRID - 1):
+        past = grid[-1] + h * np.arange(1, more + 1)
+        grid = np.concatenate([grid, past])
+        costs = np.concatenate([costs, general_profiles(tracks, runs, intrinsics, W[used],
+                                                        T[used], np.exp(past))])
+    if np.any(edge == 0):
+        past = grid[0] - h * np.arange(more, 0, -1)
+        grid = np.concatenate([past, grid])
+        costs = np.concatenate([general_profiles(tracks, runs, intrinsics, W[used], T[used],
+                                                 np.exp(past)), costs])
     xs, variances = [], []
     for i, b in enumerate(used):                                 # bodies, not lines
         c = costs[:, i]
         k = int(np.argmin(c))
         dof = dof_track[members[b]].sum() - 5.0
-        if not (0 < k < _GENERAL_GRID - 1 and dof > 0 and c[k] > 0):
+        if not (0 < k < grid.size - 1 and dof > 0 and c[k] > 0):
             continue
         noise = c[k] / dof
         curvature = (c[k - 1] - 2.0 * c[k] + c[k + 1]) / h ** 2
