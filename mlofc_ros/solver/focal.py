@@ -396,17 +396,15 @@ def _general_estimates(tracks: np.ndarray, labels: np.ndarray, bodies: Sequence[
     # a minimum at the grid's edge: the grid goes on past it once (the windows' profiles
     # lean towards the f they were solved at, so a start far off stayed there)
     edge = np.argmin(costs, axis=0)
-    more = _GENERAL_GRID // 2
-    if np.any(edge == _GENERAL_GRID - 1):
-        past = grid[-1] + h * np.arange(1, more + 1)
+    steps = h * np.arange(1, _GENERAL_GRID // 2 + 1)
+    past = np.concatenate([grid[-1] + steps if np.any(edge == _GENERAL_GRID - 1) else [],
+                           grid[0] - steps if np.any(edge == 0) else []])
+    if past.size:                                   # both ends in one lockstep batch
         grid = np.concatenate([grid, past])
         costs = np.concatenate([costs, general_profiles(tracks, runs, intrinsics, W[used],
                                                         T[used], np.exp(past))])
-    if np.any(edge == 0):
-        past = grid[0] - h * np.arange(more, 0, -1)
-        grid = np.concatenate([past, grid])
-        costs = np.concatenate([general_profiles(tracks, runs, intrinsics, W[used], T[used],
-                                                 np.exp(past)), costs])
+        order = np.argsort(grid)
+        grid, costs = grid[order], costs[order]
     xs, variances = [], []
     for i, b in enumerate(used):                                 # bodies, not lines
         c = costs[:, i]
