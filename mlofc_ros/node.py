@@ -724,9 +724,10 @@ class MlofcNode(Node):
         """Say that method 'auto' moved to the general model, and place the solver anew."""
         choice = self._pipeline.method_choice
         self.get_logger().info(
-            'method auto: the rotation model misfits the scene (its median track residual '
-            f"{choice.ratio:.1f}x the tracks' jitter: bodies translate relative to the "
-            f'camera); solving with {self._pipeline.method} from now on')
+            "method auto: the rotation model misfits the scene (its tracks' residuals: "
+            f"the median {choice.ratio:.1f}x the tracks' jitter, the 75th percentile "
+            f'{choice.quartile_ratio:.1f}x their own: bodies translate relative to the camera); '
+            f'solving with {self._pipeline.method} from now on')
         with self._lock:
             self._move_solver = True
             self._method = self._pipeline.method    # said once

@@ -46,7 +46,8 @@ from mlofc_ros.frame import (centred_intrinsics, check_image_size, check_lines, 
 from mlofc_ros.label_votes import LabelVotes, match_bodies, ROTATION_GATE, ROTATION_WEIGHT
 from mlofc_ros.lane import Finished, SolveJob
 from mlofc_ros.method_choice import (AUTO, MethodChoice, MIN_JITTER_FRAMES, misfit_bodies,
-                                     ROTATION_METHOD, track_jitter, TRANSLATION_METHOD)
+                                     ROTATION_METHOD, track_jitter, track_jitters,
+                                     TRANSLATION_METHOD)
 from mlofc_ros.solver import get_method, Method, segment_lines, SegmentationResult, StepNotTaken
 from mlofc_ros.solver.focal import focal_evidence, FOCAL_PRIOR_LOG_SIGMA, FocalEstimate
 from mlofc_ros.solver.warm import FULL_AFTER_SEARCH, result_motions, WarmStarts
@@ -862,13 +863,14 @@ class Pipeline:
             problems.append(f'solver failed: {type(exc).__name__}: {exc}')
             return None
         self._warm.solved(method, res, obs.stamp, obs.frame_interval)
-        self._jitter = math.nan
+        self._jitter, jitters = math.nan, None
         if res.method == ROTATION_METHOD and tracks.shape[1] >= MIN_JITTER_FRAMES:
             # the yardstick of the choice, the alike bodies and the misfit bodies
-            self._jitter = track_jitter(tracks)
+            jitters = track_jitters(tracks)
+            self._jitter = track_jitter(tracks, jitters)
         if (auto and method.name == self._choice.method
                 and tracks.shape[1] >= min(method.window, self._window.size)):
-            if self._choice.add(res.residuals, self._jitter):
+            if self._choice.add(res.residuals, self._jitter, jitters):
                 # the votes so far are the rotation model's labels of a scene it misfits
                 self._forget_votes()
         if self._votes is not None and res.method == TRANSLATION_METHOD:

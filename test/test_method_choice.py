@@ -14,8 +14,9 @@
 """``method='auto'``: the tracks' jitter, the switch to the general model, the pipeline's use."""
 import math
 
-from mlofc_ros.method_choice import (MethodChoice, misfit_bodies, MISFIT_RATIO, MISFIT_SOLVES,
-                                     track_jitter, TRANSLATION_METHOD)
+from mlofc_ros.method_choice import (MethodChoice, misfit_bodies, MISFIT_QUARTILE_RATIO,
+                                     MISFIT_RATIO, MISFIT_SOLVES, track_jitter,
+                                     track_jitters, TRANSLATION_METHOD)
 from mlofc_ros.pipeline import Pipeline
 from mlofc_tools.scoring import misclassification
 import numpy as np
@@ -82,6 +83,47 @@ def test_the_choice_moves_on_the_median_of_a_few_windows_and_for_good():
     assert choice.method == TRANSLATION_METHOD
     choice.reset()
     assert choice.method == 'robust' and choice.ratio is None
+
+
+def test_the_choice_moves_when_a_quarter_of_the_tracks_misfit_far_beyond_their_own_jitter():
+    # the median track fits (the bodies the model explains); the worst third do not
+    jitter = 0.5
+    fits = np.full(60, 0.8 * MISFIT_RATIO * jitter)
+    few, third = fits.copy(), fits.copy()
+    few[:12] = 10.0 * MISFIT_QUARTILE_RATIO * jitter            # a fifth: outliers, clutter
+    third[:20] = 1.5 * MISFIT_QUARTILE_RATIO * jitter
+    smooth = np.full(60, 0.5 * jitter)       # each track's own: taken as the scene's at least
+    wobbly = smooth.copy()
+    wobbly[:20] = 2.0 * jitter               # tracks the tracker follows poorly misfit alike
+    choice = MethodChoice()
+    assert not any(choice.add(few, jitter, smooth) for _ in range(2 * MISFIT_SOLVES))
+    assert not any(choice.add(third, jitter, wobbly) for _ in range(2 * MISFIT_SOLVES))
+    # tracks seen in too few frames for a jitter of their own are left out of the quartile
+    unseen = np.where(np.arange(60) < 20, np.nan, smooth)
+    assert not any(choice.add(third, jitter, unseen) for _ in range(2 * MISFIT_SOLVES))
+    assert choice.method == 'robust'
+    # one window of many that misfits does not count
+    assert not any(choice.add(r, jitter, smooth) for r in [third] + [few] * MISFIT_SOLVES)
+    switched = [choice.add(third, jitter, smooth) for _ in range(MISFIT_SOLVES)]
+    assert switched.index(True) == MISFIT_SOLVES // 2 and sum(switched) == 1
+    assert choice.method == TRANSLATION_METHOD
+    assert choice.ratio < MISFIT_RATIO < MISFIT_QUARTILE_RATIO < choice.quartile_ratio
+    choice.reset()
+    assert choice.quartile_ratio is None
+    # without the tracks' own jitters every track is judged against the scene's
+    choice = MethodChoice()
+    assert [choice.add(third, jitter) for _ in range(MISFIT_SOLVES)][-1]
+
+
+def test_each_tracks_own_jitter_has_the_scenes_as_its_median():
+    tracks = moving_lines(300, 5, 0.5, seed=4)
+    tracks[:3, 2] = np.nan                                        # not seen in every frame
+    tracks[3, :, 2:] = tracks[3, :, :2]                           # zero length
+    own = track_jitters(tracks)
+    assert own.shape == (300,) and np.all(np.isnan(own[:4])) and np.all(own[4:] >= 0)
+    assert track_jitter(tracks) == pytest.approx(track_jitter(tracks, own), rel=1e-12)
+    assert track_jitter(tracks) == pytest.approx(np.median(own[4:]), rel=0.02)
+    assert np.all(np.isnan(track_jitters(tracks[:, :4])))
 
 
 def stream(pipe: Pipeline, tracks: np.ndarray, intr) -> list:
