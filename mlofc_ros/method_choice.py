@@ -45,6 +45,7 @@ tracks' jitter (hamburg_taxi's cars) stay with the rotation model, and windows o
 from collections import deque
 from typing import Deque, Optional, Tuple
 
+from mlofc_ros.solver.robust import column_quantile
 import numpy as np
 
 #: The parameter value that chooses the method from the scene.
@@ -232,14 +233,10 @@ class MethodChoice:
         own = (np.full(residuals.shape, jitter) if jitters is None
                else np.maximum(np.asarray(jitters, dtype=float), jitter))
         ratios = residuals / own
-        ratios = np.sort(ratios[np.isfinite(ratios)])
-        quartile = 0.0
-        if len(ratios) >= MIN_JITTER_TRACKS:
-            # np.percentile's 75th (linear), without its hundred calls a frame
-            at = 0.75 * (len(ratios) - 1)
-            low = int(at)
-            quartile = float(ratios[low] + (at - low) * (ratios[min(low + 1, len(ratios) - 1)]
-                                                         - ratios[low]))
+        ratios = ratios[np.isfinite(ratios)]
+        # np.percentile's 75th, without its hundred calls a frame
+        quartile = (float(column_quantile(ratios[:, None], 0.75)[0])
+                    if len(ratios) >= MIN_JITTER_TRACKS else 0.0)
         self._ratios.append((float(np.median(residuals[finite])) / jitter, quartile))
         if len(self._ratios) < MISFIT_SOLVES:
             return False
