@@ -185,3 +185,18 @@ def test_misfit_bodies_are_those_whose_tracks_the_rotation_model_misfits():
                                   [False, True, False])        # body 2: too few tracks
     assert not np.any(misfit_bodies(labels, residuals, 2.0, 3))
     assert not np.any(misfit_bodies(labels, residuals, float('nan'), 3))
+
+
+def test_the_quartile_is_numpys_75th_percentile_of_the_ratios_to_each_tracks_own_jitter():
+    # the switch's quartile is np.percentile's, bit for bit (the solver's column_quantile)
+    rng = np.random.default_rng(7)
+    jitter = 0.4
+    residuals = jitter * np.concatenate([rng.uniform(0.2, 1.0, 40), rng.uniform(4.0, 10.0, 31)])
+    residuals[[3, 50]] = np.nan                                   # unusable tracks
+    jitters = jitter * rng.uniform(0.5, 2.0, residuals.size)
+    jitters[7] = np.nan                                           # no jitter of its own
+    choice = MethodChoice()
+    switched = [choice.add(residuals, jitter, jitters) for _ in range(MISFIT_SOLVES)]
+    assert switched[-1] and choice.ratio < MISFIT_RATIO
+    ratios = residuals / np.maximum(jitters, jitter)
+    assert choice.quartile_ratio == float(np.percentile(ratios[np.isfinite(ratios)], 75))
